@@ -1,0 +1,287 @@
+//! Poses and rigid transforms in 2D and 3D on nalgebra (RC10_LIB `CoordConvert`).
+//!
+//! All angles are radians; 3D orientation is roll-pitch-yaw in ZYX order
+//! (`R = Rz(yaw) · Ry(pitch) · Rx(roll)`). Distances are in whatever unit you use
+//! consistently (metres in rc10's chassis code). Transforms are plain `Copy` values: copying one
+//! copies its numbers (RC10_LIB's copy shared a matrix buffer between copies).
+//!
+//! A transform built from a pose maps coordinates *in the posed frame* to coordinates *in the
+//! frame the pose is written in* ("sensor to robot" for a sensor mounted at that pose).
+//!
+//! The two examples from the RC10_LIB manual:
+//!
+//! ```
+//! use core::f32::consts::FRAC_PI_4;
+//! use rc10_core::geometry::{Point2, Pose2D, Transform2D};
+//! // A sensor at (0.2, 0.1) m on the robot, turned 45° left, sees a point at (0.5, 0) m.
+//! let sensor_to_robot = Transform2D::from_pose(Pose2D::new(0.2, 0.1, FRAC_PI_4));
+//! let p = sensor_to_robot.apply(Point2::new(0.5, 0.0));
+//! // (0.2 + 0.5·cos 45°, 0.1 + 0.5·sin 45°) = (0.553553, 0.453553)
+//! assert!((p.x - 0.553_553).abs() < 1e-5 && (p.y - 0.453_553).abs() < 1e-5);
+//! ```
+//!
+//! ```
+//! use core::f32::consts::FRAC_PI_2;
+//! use rc10_core::geometry::{Point3, Pose3D, Transform3D};
+//! // A camera at (1, 2, 0.5) m in the world, yawed 90°, sees a point at (0, 1, 0) m.
+//! let camera_to_world = Transform3D::from_pose(Pose3D::new(1.0, 2.0, 0.5, 0.0, 0.0, FRAC_PI_2));
+//! let p = camera_to_world.apply(Point3::new(0.0, 1.0, 0.0));
+//! // Rz(90°)·(0, 1, 0) = (-1, 0, 0); plus the translation: (0, 2, 0.5).
+//! assert!((p - Point3::new(0.0, 2.0, 0.5)).norm() < 1e-6);
+//! // And back through the inverse.
+//! let back = camera_to_world.inverse().apply(p);
+//! assert!((back - Point3::new(0.0, 1.0, 0.0)).norm() < 1e-6);
+//! ```
+
+use core::ops::Mul;
+use nalgebra::{Isometry2, Isometry3, Matrix3, Matrix4, Translation2, Translation3};
+use nalgebra::{UnitComplex, UnitQuaternion, Vector2, Vector3};
+
+/// A 2D point (nalgebra), in metres by rc10's convention.
+pub type Point2 = nalgebra::Point2<f32>;
+/// A 3D point (nalgebra), in metres by rc10's convention.
+pub type Point3 = nalgebra::Point3<f32>;
+
+/// A planar pose: position and heading (RC10_LIB `Point2D` with an angle).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Pose2D {
+    /// X position.
+    pub x: f32,
+    /// Y position.
+    pub y: f32,
+    /// Heading in radians, counter-clockwise from +X.
+    pub theta_rad: f32,
+}
+
+impl Pose2D {
+    /// A pose at `(x, y)` with heading `theta_rad`.
+    pub const fn new(x: f32, y: f32, theta_rad: f32) -> Self {
+        Self { x, y, theta_rad }
+    }
+}
+
+/// A 3D pose: position and ZYX roll-pitch-yaw orientation (RC10_LIB `Point3D`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Pose3D {
+    /// X position.
+    pub x: f32,
+    /// Y position.
+    pub y: f32,
+    /// Z position.
+    pub z: f32,
+    /// Rotation about X in radians (applied first).
+    pub roll_rad: f32,
+    /// Rotation about Y in radians (applied second).
+    pub pitch_rad: f32,
+    /// Rotation about Z in radians (applied last).
+    pub yaw_rad: f32,
+}
+
+impl Pose3D {
+    /// A pose at `(x, y, z)` with orientation roll, pitch, yaw (radians, ZYX).
+    pub const fn new(x: f32, y: f32, z: f32, roll_rad: f32, pitch_rad: f32, yaw_rad: f32) -> Self {
+        Self {
+            x,
+            y,
+            z,
+            roll_rad,
+            pitch_rad,
+            yaw_rad,
+        }
+    }
+}
+
+/// A rigid 2D transform (rotation then translation); RC10_LIB `HomogeneousTransform2D`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform2D(pub Isometry2<f32>);
+
+impl Transform2D {
+    /// The identity transform.
+    pub fn identity() -> Self {
+        Self(Isometry2::identity())
+    }
+
+    /// The transform from the frame at `pose` into the frame `pose` is written in.
+    pub fn from_pose(pose: Pose2D) -> Self {
+        Self(Isometry2::from_parts(
+            Translation2::new(pose.x, pose.y),
+            UnitComplex::new(pose.theta_rad),
+        ))
+    }
+
+    /// The pose this transform places its frame at (heading in `(-π, π]`).
+    pub fn to_pose(&self) -> Pose2D {
+        let t = self.0.translation.vector;
+        Pose2D::new(t.x, t.y, self.0.rotation.angle())
+    }
+
+    /// Maps a point.
+    pub fn apply(&self, point: Point2) -> Point2 {
+        self.0 * point
+    }
+
+    /// Rotates a vector (a velocity, say) without translating it.
+    pub fn apply_vector(&self, v: Vector2<f32>) -> Vector2<f32> {
+        self.0 * v
+    }
+
+    /// `self ∘ other`: first `other`, then `self`.
+    pub fn compose(&self, other: &Self) -> Self {
+        Self(self.0 * other.0)
+    }
+
+    /// The inverse transform.
+    pub fn inverse(&self) -> Self {
+        Self(self.0.inverse())
+    }
+
+    /// The 3×3 homogeneous matrix.
+    pub fn to_homogeneous(&self) -> Matrix3<f32> {
+        self.0.to_homogeneous()
+    }
+}
+
+impl Mul for Transform2D {
+    type Output = Self;
+    fn mul(self, rhs: Self) -> Self {
+        self.compose(&rhs)
+    }
+}
+
+/// A rigid 3D transform (rotation then translation); RC10_LIB `HomogeneousTransform3D`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform3D(pub Isometry3<f32>);
+
+impl Transform3D {
+    /// The identity transform.
+    pub fn identity() -> Self {
+        Self(Isometry3::identity())
+    }
+
+    /// The transform from the frame at `pose` into the frame `pose` is written in.
+    pub fn from_pose(pose: Pose3D) -> Self {
+        Self(Isometry3::from_parts(
+            Translation3::new(pose.x, pose.y, pose.z),
+            // nalgebra applies roll, then pitch, then yaw about fixed axes: R = Rz·Ry·Rx.
+            UnitQuaternion::from_euler_angles(pose.roll_rad, pose.pitch_rad, pose.yaw_rad),
+        ))
+    }
+
+    /// The pose this transform places its frame at (ZYX angles; pitch in `[-π/2, π/2]`).
+    pub fn to_pose(&self) -> Pose3D {
+        let t = self.0.translation.vector;
+        let (roll, pitch, yaw) = self.0.rotation.euler_angles();
+        Pose3D::new(t.x, t.y, t.z, roll, pitch, yaw)
+    }
+
+    /// Maps a point.
+    pub fn apply(&self, point: Point3) -> Point3 {
+        self.0 * point
+    }
+
+    /// Rotates a vector without translating it.
+    pub fn apply_vector(&self, v: Vector3<f32>) -> Vector3<f32> {
+        self.0 * v
+    }
+
+    /// `self ∘ other`: first `other`, then `self`.
+    pub fn compose(&self, other: &Self) -> Self {
+        Self(self.0 * other.0)
+    }
+
+    /// The inverse transform.
+    pub fn inverse(&self) -> Self {
+        Self(self.0.inverse())
+    }
+
+    /// The 4×4 homogeneous matrix.
+    pub fn to_homogeneous(&self) -> Matrix4<f32> {
+        self.0.to_homogeneous()
+    }
+}
+
+impl Mul for Transform3D {
+    type Output = Self;
+    fn mul(self, rhs: Self) -> Self {
+        self.compose(&rhs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f32::consts::{FRAC_PI_2, PI};
+    use proptest::prelude::*;
+
+    #[test]
+    fn zyx_order_matches_hand_rotation() {
+        // roll 90° then yaw 90°: +Y → (roll) +Z → (yaw keeps Z) +Z.
+        // +X → (roll keeps X) +X → (yaw) +Y.
+        let t = Transform3D::from_pose(Pose3D::new(0.0, 0.0, 0.0, FRAC_PI_2, 0.0, FRAC_PI_2));
+        assert!((t.apply(Point3::new(0.0, 1.0, 0.0)) - Point3::new(0.0, 0.0, 1.0)).norm() < 1e-6);
+        assert!((t.apply(Point3::new(1.0, 0.0, 0.0)) - Point3::new(0.0, 1.0, 0.0)).norm() < 1e-6);
+    }
+
+    #[test]
+    fn compose_applies_right_operand_first() {
+        let move_x = Transform2D::from_pose(Pose2D::new(1.0, 0.0, 0.0));
+        let turn = Transform2D::from_pose(Pose2D::new(0.0, 0.0, FRAC_PI_2));
+        // turn ∘ move_x: (0,0) → (1,0) → (0,1).
+        let p = (turn * move_x).apply(Point2::origin());
+        assert!((p - Point2::new(0.0, 1.0)).norm() < 1e-6);
+    }
+
+    #[test]
+    fn to_pose_round_trips() {
+        let pose = Pose2D::new(0.3, -0.2, 2.0);
+        let back = Transform2D::from_pose(pose).to_pose();
+        assert!((back.x - 0.3).abs() < 1e-6 && (back.theta_rad - 2.0).abs() < 1e-6);
+        let p3 = Pose3D::new(1.0, 2.0, 3.0, 0.1, -0.2, 0.3);
+        let b3 = Transform3D::from_pose(p3).to_pose();
+        assert!((b3.roll_rad - 0.1).abs() < 1e-5);
+        assert!((b3.pitch_rad + 0.2).abs() < 1e-5);
+        assert!((b3.yaw_rad - 0.3).abs() < 1e-5);
+    }
+
+    #[test]
+    fn homogeneous_matrix_has_translation_column() {
+        let m = Transform2D::from_pose(Pose2D::new(4.0, 5.0, PI)).to_homogeneous();
+        assert_eq!((m[(0, 2)], m[(1, 2)], m[(2, 2)]), (4.0, 5.0, 1.0));
+    }
+
+    #[test]
+    fn copies_are_independent() {
+        let a = Transform2D::from_pose(Pose2D::new(1.0, 0.0, 0.0));
+        let mut b = a;
+        b = b * b;
+        assert_eq!(a.to_pose().x, 1.0);
+        assert_eq!(b.to_pose().x, 2.0);
+    }
+
+    proptest! {
+        #[test]
+        fn transform_compose_inverse_is_identity_3d(
+            x in -10f32..10.0, y in -10f32..10.0, z in -10f32..10.0,
+            r in -PI..PI, p in -1.5f32..1.5, w in -PI..PI,
+            px in -5f32..5.0, py in -5f32..5.0, pz in -5f32..5.0,
+        ) {
+            let t = Transform3D::from_pose(Pose3D::new(x, y, z, r, p, w));
+            let q = Point3::new(px, py, pz);
+            let round = t.compose(&t.inverse()).apply(q);
+            prop_assert!((round - q).norm() < 1e-4);
+            prop_assert!((t.inverse().apply(t.apply(q)) - q).norm() < 1e-4);
+        }
+
+        #[test]
+        fn transform_compose_inverse_is_identity_2d(
+            x in -10f32..10.0, y in -10f32..10.0, th in -10f32..10.0,
+            px in -5f32..5.0, py in -5f32..5.0,
+        ) {
+            let t = Transform2D::from_pose(Pose2D::new(x, y, th));
+            let q = Point2::new(px, py);
+            prop_assert!(((t * t.inverse()).apply(q) - q).norm() < 1e-4);
+        }
+    }
+}

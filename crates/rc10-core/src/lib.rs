@@ -1,0 +1,11 @@
+#![doc = include_str!("../README.md")]
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod encoder;
+pub mod filter;
+pub mod geometry;
+pub mod math;
+pub mod pid;
+pub mod time;

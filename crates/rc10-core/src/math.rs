@@ -1,0 +1,251 @@
+//! Small numeric helpers every robot needs: clamping with defined NaN behaviour, degree/radian
+//! conversion, angle wrapping and the RC10 `ramp` step.
+//!
+//! Everything here is total: no input (NaN, ±inf, reversed bounds) panics, and every function
+//! documents what it returns for such input.
+
+use core::f32::consts::{PI, TAU};
+
+/// Clamps `value` into `[min, max]` (RC10_LIB `constrain`).
+///
+/// Defined for every input, unlike [`f32::clamp`] which panics on reversed or NaN bounds:
+/// - a NaN `value` returns `0.0` clamped into the bounds (the "do nothing" command for a motor);
+/// - a NaN bound is ignored (that side is unbounded);
+/// - reversed bounds (`min > max`) are swapped.
+///
+/// ```
+/// use rc10_core::math::constrain;
+/// assert_eq!(constrain(25.0, -20.0, 20.0), 20.0);
+/// assert_eq!(constrain(f32::NAN, -20.0, 20.0), 0.0);
+/// assert_eq!(constrain(f32::NAN, 1.0, 2.0), 1.0);
+/// assert_eq!(constrain(5.0, 10.0, -10.0), 5.0);
+/// ```
+#[inline]
+pub fn constrain(value: f32, min: f32, max: f32) -> f32 {
+    let (lo, hi) = if min > max { (max, min) } else { (min, max) };
+    let v = if value.is_nan() { 0.0 } else { value };
+    // `f32::max`/`min` return the non-NaN operand, so a NaN bound leaves that side open.
+    v.max(lo).min(hi)
+}
+
+/// Clamps `value` into `[-limit, limit]` and always returns a finite number.
+///
+/// `limit` is taken by magnitude; a NaN or infinite limit means "no limit" (the result is still
+/// kept within `±f32::MAX`). A NaN `value` returns `0.0`.
+///
+/// ```
+/// use rc10_core::math::saturate;
+/// assert_eq!(saturate(-30.0, 20.0), -20.0);
+/// assert_eq!(saturate(f32::INFINITY, f32::INFINITY), f32::MAX);
+/// assert_eq!(saturate(f32::NAN, 1.0), 0.0);
+/// ```
+#[inline]
+pub fn saturate(value: f32, limit: f32) -> f32 {
+    let lim = if limit.is_finite() {
+        limit.abs()
+    } else {
+        f32::MAX
+    };
+    constrain(value, -lim, lim)
+}
+
+/// Converts degrees to radians.
+#[inline]
+pub const fn deg_to_rad(angle_deg: f32) -> f32 {
+    angle_deg * (PI / 180.0)
+}
+
+/// Converts radians to degrees.
+#[inline]
+pub const fn rad_to_deg(angle_rad: f32) -> f32 {
+    angle_rad * (180.0 / PI)
+}
+
+/// Wraps `value` into `[0, period)`.
+///
+/// Returns `0.0` for a non-finite `value` or a non-finite or non-positive `period`.
+///
+/// ```
+/// use rc10_core::math::wrap_positive;
+/// assert_eq!(wrap_positive(370.0, 360.0), 10.0);
+/// assert_eq!(wrap_positive(-10.0, 360.0), 350.0);
+/// ```
+#[inline]
+pub fn wrap_positive(value: f32, period: f32) -> f32 {
+    if !value.is_finite() || !period.is_finite() || period <= 0.0 {
+        return 0.0;
+    }
+    let r = value - period * libm::floorf(value / period);
+    // Rounding can land exactly on `period` for tiny negative inputs (e.g. -1e-9).
+    if r >= period || r < 0.0 { 0.0 } else { r }
+}
+
+/// Wraps `value` into `[-period/2, period/2)`: the signed shortest offset on a circle.
+///
+/// Returns `0.0` for a non-finite `value` or a non-finite or non-positive `period`.
+///
+/// ```
+/// use rc10_core::math::wrap_signed;
+/// assert_eq!(wrap_signed(350.0, 360.0), -10.0);
+/// assert_eq!(wrap_signed(180.0, 360.0), -180.0);
+/// ```
+#[inline]
+pub fn wrap_signed(value: f32, period: f32) -> f32 {
+    if !value.is_finite() || !period.is_finite() || period <= 0.0 {
+        return 0.0;
+    }
+    let half = period * 0.5;
+    wrap_positive(value + half, period) - half
+}
+
+/// Wraps an angle into `[0, 360)` degrees.
+#[inline]
+pub fn wrap_deg_360(angle_deg: f32) -> f32 {
+    wrap_positive(angle_deg, 360.0)
+}
+
+/// Wraps an angle into `[-180, 180)` degrees.
+#[inline]
+pub fn wrap_deg_180(angle_deg: f32) -> f32 {
+    wrap_signed(angle_deg, 360.0)
+}
+
+/// Wraps an angle into `[-π, π)` radians.
+#[inline]
+pub fn wrap_rad_pi(angle_rad: f32) -> f32 {
+    wrap_signed(angle_rad, TAU)
+}
+
+/// The shortest signed rotation from `from_deg` to `to_deg`, in `[-180, 180)` degrees.
+///
+/// Works for any mix of conventions (`[0, 360)`, `±180`, multi-turn): only the difference
+/// modulo 360° matters.
+///
+/// ```
+/// use rc10_core::math::angle_diff_deg;
+/// assert_eq!(angle_diff_deg(350.0, 10.0), 20.0);   // across 0, not -340
+/// assert_eq!(angle_diff_deg(170.0, -170.0), 20.0); // across ±180
+/// ```
+#[inline]
+pub fn angle_diff_deg(from_deg: f32, to_deg: f32) -> f32 {
+    wrap_deg_180(to_deg - from_deg)
+}
+
+/// Moves `current` towards `target` by at most `max_step` (RC10_LIB `ramp`).
+///
+/// `max_step` is taken by magnitude. A NaN `target` leaves `current` unchanged; a NaN
+/// `current` jumps to `target` (there is nothing to ramp from). See [`crate::filter::Ramp`]
+/// for a stateful limiter with a rate in units per second.
+///
+/// ```
+/// use rc10_core::math::ramp;
+/// assert_eq!(ramp(0.0, 10.0, 3.0), 3.0);
+/// assert_eq!(ramp(9.0, 10.0, 3.0), 10.0);
+/// assert_eq!(ramp(0.0, -10.0, 3.0), -3.0);
+/// ```
+#[inline]
+pub fn ramp(current: f32, target: f32, max_step: f32) -> f32 {
+    if target.is_nan() {
+        return current;
+    }
+    if current.is_nan() {
+        return target;
+    }
+    let step = if max_step.is_nan() {
+        0.0
+    } else {
+        max_step.abs()
+    };
+    current + constrain(target - current, -step, step)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn constrain_inside_range_returns_value() {
+        assert_eq!(constrain(1.5, -2.0, 2.0), 1.5);
+    }
+
+    #[test]
+    fn constrain_infinite_value_clamps_to_bound() {
+        assert_eq!(constrain(f32::INFINITY, -2.0, 2.0), 2.0);
+        assert_eq!(constrain(f32::NEG_INFINITY, -2.0, 2.0), -2.0);
+    }
+
+    #[test]
+    fn constrain_nan_bound_is_open() {
+        assert_eq!(constrain(100.0, f32::NAN, 2.0), 2.0);
+        assert_eq!(constrain(-100.0, f32::NAN, 2.0), -100.0);
+    }
+
+    #[test]
+    fn constrain_nan_value_with_range_excluding_zero_returns_nearest_bound() {
+        assert_eq!(constrain(f32::NAN, -5.0, -1.0), -1.0);
+    }
+
+    #[test]
+    fn wrap_deg_360_examples_match_hand_values() {
+        assert_eq!(wrap_deg_360(720.0), 0.0);
+        assert_eq!(wrap_deg_360(-90.0), 270.0);
+        assert_eq!(wrap_deg_360(359.5), 359.5);
+        // Tiny negative: mathematically 360 - 1e-9, not representable: must not return 360.
+        let w = wrap_deg_360(-1e-9);
+        assert!((0.0..360.0).contains(&w));
+    }
+
+    #[test]
+    fn wrap_rad_pi_maps_three_half_pi_to_minus_half_pi() {
+        assert!((wrap_rad_pi(1.5 * PI) + 0.5 * PI).abs() < 1e-6);
+    }
+
+    #[test]
+    fn wrap_non_finite_returns_zero() {
+        assert_eq!(wrap_deg_360(f32::NAN), 0.0);
+        assert_eq!(wrap_deg_180(f32::INFINITY), 0.0);
+        assert_eq!(wrap_positive(1.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn angle_diff_takes_short_way_in_both_conventions() {
+        assert_eq!(angle_diff_deg(10.0, 350.0), -20.0);
+        assert_eq!(angle_diff_deg(-170.0, 170.0), -20.0);
+        assert_eq!(angle_diff_deg(0.0, 90.0), 90.0);
+    }
+
+    #[test]
+    fn deg_rad_round_trip() {
+        assert!((deg_to_rad(180.0) - PI).abs() < 1e-6);
+        assert!((rad_to_deg(PI / 2.0) - 90.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn ramp_nan_target_holds_current() {
+        assert_eq!(ramp(4.0, f32::NAN, 1.0), 4.0);
+        assert_eq!(ramp(f32::NAN, 7.0, 1.0), 7.0);
+    }
+
+    proptest! {
+        #[test]
+        fn wrap_signed_stays_in_half_open_range(v in -1.0e6f32..1.0e6) {
+            let w = wrap_deg_180(v);
+            prop_assert!((-180.0..180.0).contains(&w), "{v} -> {w}");
+        }
+
+        #[test]
+        fn angle_diff_is_equivalent_mod_360(a in -720.0f32..720.0, b in -720.0f32..720.0) {
+            let d = angle_diff_deg(a, b);
+            // a + d must point where b points.
+            let miss = wrap_deg_180(a + d - b).abs();
+            prop_assert!(miss < 1e-3, "a={a} b={b} d={d}");
+        }
+
+        #[test]
+        fn constrain_never_escapes_bounds(v in proptest::num::f32::ANY, lo in -1e3f32..1e3, hi in -1e3f32..1e3) {
+            let c = constrain(v, lo, hi);
+            prop_assert!(c >= lo.min(hi) && c <= lo.max(hi));
+        }
+    }
+}

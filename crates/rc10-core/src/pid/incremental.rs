@@ -1,0 +1,327 @@
+//! Incremental (velocity-form) PID with an optional tracking differentiator on the target:
+//! RC10_LIB's speed-loop controller.
+
+use super::{
+    ErrorMode, PidConfigError, PidTerms, TrackingDifferentiator, check_deadband, check_gains,
+    check_limit,
+};
+use crate::math::saturate;
+
+/// Configuration of an [`IncrementalPid`]; chainable `const` setters like
+/// [`PidConfig`](super::PidConfig).
+///
+/// ```
+/// use rc10_core::pid::IncrementalPidConfig;
+/// // RC10_LIB's M3508 speed-loop demo gains, converted: kp 18 mA/rpm, ki 0.015 mA/rpm per
+/// // 1 ms tick = 15 mA/(rpm·s), 5 rpm deadband, 15 A limit, TD off. Output in mA.
+/// let rc10_demo = IncrementalPidConfig::new(18.0, 15.0, 0.0)
+///     .with_deadband(5.0)
+///     .with_output_limit(15_000.0);
+/// assert!(rc10_demo.validate().is_ok());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IncrementalPidConfig {
+    /// Proportional gain, output units per error unit.
+    pub kp: f32,
+    /// Integral gain, output units per (error unit · second).
+    pub ki: f32,
+    /// Derivative gain, output units per (error unit / second).
+    pub kd: f32,
+    /// `|output| ≤ output_limit`. In the incremental form the output *is* the integrator, so
+    /// limiting it is the anti-windup: the output leaves the limit as soon as the error reverses.
+    pub output_limit: f32,
+    /// While `|error| ≤ deadband` the output is held (no increment).
+    pub deadband: f32,
+    /// Tracking-differentiator speed `r` in rad/s applied to the target; `None` for no TD.
+    pub td_r_rad_s: Option<f32>,
+}
+
+impl IncrementalPidConfig {
+    /// Gains with no limit, no deadband and no TD.
+    pub const fn new(kp: f32, ki: f32, kd: f32) -> Self {
+        Self {
+            kp,
+            ki,
+            kd,
+            output_limit: f32::INFINITY,
+            deadband: 0.0,
+            td_r_rad_s: None,
+        }
+    }
+
+    /// Sets [`output_limit`](Self::output_limit).
+    #[must_use]
+    pub const fn with_output_limit(mut self, limit: f32) -> Self {
+        self.output_limit = limit;
+        self
+    }
+
+    /// Sets [`deadband`](Self::deadband).
+    #[must_use]
+    pub const fn with_deadband(mut self, deadband: f32) -> Self {
+        self.deadband = deadband;
+        self
+    }
+
+    /// Enables the tracking differentiator with speed `r_rad_s` (rad/s).
+    #[must_use]
+    pub const fn with_td(mut self, r_rad_s: f32) -> Self {
+        self.td_r_rad_s = Some(r_rad_s);
+        self
+    }
+
+    /// Checks that the configuration can work.
+    pub const fn validate(&self) -> Result<(), PidConfigError> {
+        if let Err(e) = check_gains(self.kp, self.ki, self.kd) {
+            return Err(e);
+        }
+        if let Err(e) = check_limit(self.output_limit) {
+            return Err(e);
+        }
+        if let Err(e) = check_deadband(self.deadband) {
+            return Err(e);
+        }
+        if let Some(r) = self.td_r_rad_s
+            && let Err(e) = TrackingDifferentiator::new(r)
+        {
+            return Err(e);
+        }
+        Ok(())
+    }
+}
+
+/// Incremental PID: each step adds
+/// `Δu = kp·(e[k] - e[k-1]) + ki·e[k]·dt + kd·(e[k] - 2e[k-1] + e[k-2]) / dt`
+/// to the output, which is limited to `±output_limit`.
+///
+/// With a TD, `e = tracked target - measurement`, where the TD follows the target smoothly
+/// (so a target step does not kick P and D). On the first step after construction or
+/// [`reset`](Self::reset) the TD starts from the measurement and the error history from the
+/// current error, so the first step adds only the I term.
+///
+/// ```
+/// use rc10_core::pid::{IncrementalPid, IncrementalPidConfig};
+/// let mut pid = IncrementalPid::new(IncrementalPidConfig::new(1.0, 100.0, 0.0)).unwrap();
+/// let t = pid.update(10.0, 0.0, 0.001);
+/// assert!((t.output - 1.0).abs() < 1e-6); // first step: ki·e·dt = 100·10·0.001
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IncrementalPid {
+    config: IncrementalPidConfig,
+    td: Option<TrackingDifferentiator>,
+    output: f32,
+    history: Option<(f32, f32)>,
+    last: PidTerms,
+}
+
+impl IncrementalPid {
+    /// A controller with the given configuration, or why the configuration cannot work.
+    pub const fn new(config: IncrementalPidConfig) -> Result<Self, PidConfigError> {
+        if let Err(e) = config.validate() {
+            return Err(e);
+        }
+        let td = match config.td_r_rad_s {
+            Some(r) => match TrackingDifferentiator::new(r) {
+                Ok(td) => Some(td),
+                Err(e) => return Err(e),
+            },
+            None => None,
+        };
+        Ok(Self {
+            config,
+            td,
+            output: 0.0,
+            history: None,
+            last: PidTerms::ZERO,
+        })
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &IncrementalPidConfig {
+        &self.config
+    }
+
+    /// Replaces the configuration (live tuning); the output is re-limited, the history kept.
+    pub fn set_config(&mut self, config: IncrementalPidConfig) -> Result<(), PidConfigError> {
+        let fresh = Self::new(config)?;
+        if config.td_r_rad_s != self.config.td_r_rad_s {
+            self.td = fresh.td;
+        }
+        self.config = config;
+        self.output = saturate(self.output, config.output_limit);
+        Ok(())
+    }
+
+    /// One control step (`target`, `measurement` in the measured unit, `dt_s` in seconds).
+    ///
+    /// Non-finite `target` or `measurement`: returns [`PidTerms::ZERO`] and leaves the state
+    /// unchanged. A `dt_s` that is not finite and positive holds the output.
+    pub fn update(&mut self, target: f32, measurement: f32, dt_s: f32) -> PidTerms {
+        if !(target.is_finite() && measurement.is_finite()) {
+            return PidTerms::ZERO;
+        }
+        let c = self.config;
+        let tracked = match &mut self.td {
+            Some(td) => {
+                if !td.is_started() {
+                    td.reset(measurement);
+                }
+                td.update(target, dt_s).0
+            }
+            None => target,
+        };
+        let e = ErrorMode::Linear.diff(tracked, measurement);
+        let (e1, e2) = self.history.unwrap_or((e, e));
+        let dt_ok = dt_s.is_finite() && dt_s > 0.0;
+
+        let (p, i, d) = if dt_ok && e.abs() > c.deadband {
+            (
+                saturate(c.kp * (e - e1), f32::INFINITY),
+                saturate(c.ki * e * dt_s, f32::INFINITY),
+                saturate(c.kd * (e - 2.0 * e1 + e2) / dt_s, f32::INFINITY),
+            )
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        self.output = saturate(self.output + p + i + d, c.output_limit);
+        if dt_ok {
+            self.history = Some((e, e1));
+        }
+        self.last = PidTerms {
+            p,
+            i,
+            d,
+            ff: 0.0,
+            output: self.output,
+        };
+        self.last
+    }
+
+    /// The terms of the most recent accepted step.
+    pub const fn last_terms(&self) -> PidTerms {
+        self.last
+    }
+
+    /// The current output.
+    pub const fn output(&self) -> f32 {
+        self.output
+    }
+
+    /// Sets the output (limited; NaN sets zero) for a bumpless takeover from another mode.
+    pub fn set_output(&mut self, value: f32) {
+        self.output = saturate(value, self.config.output_limit);
+    }
+
+    /// Zeroes the output and forgets the error history and the TD state.
+    pub fn reset(&mut self) {
+        self.output = 0.0;
+        self.history = None;
+        if let Some(td) = &mut self.td {
+            td.reset(f32::NAN);
+        }
+        self.last = PidTerms::ZERO;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const DT: f32 = 0.001;
+
+    #[test]
+    fn increments_follow_velocity_form_by_hand() {
+        // kp 2, ki 100/s, kd 0.001 s; errors 10, 12, 11 at dt 1 ms.
+        // k1: history (10,10): p 0, i 1.0, d 0                    → u 1.0
+        // k2: p 2·2 = 4, i 1.2, d 0.001·(12 - 20 + 10)/0.001 = 2  → u 8.2
+        // k3: p 2·(-1) = -2, i 1.1, d (11 - 24 + 10) = -3         → u 4.3
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(2.0, 100.0, 0.001)).unwrap();
+        assert!((c.update(10.0, 0.0, DT).output - 1.0).abs() < 1e-5);
+        assert!((c.update(12.0, 0.0, DT).output - 8.2).abs() < 1e-4);
+        let t = c.update(11.0, 0.0, DT);
+        assert!((t.p + 2.0).abs() < 1e-4 && (t.i - 1.1).abs() < 1e-4 && (t.d + 3.0).abs() < 1e-3);
+        assert!((t.output - 4.3).abs() < 1e-3);
+    }
+
+    #[test]
+    fn output_limit_is_anti_windup() {
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(0.0, 1000.0, 0.0).with_output_limit(5.0))
+                .unwrap();
+        for _ in 0..1000 {
+            c.update(100.0, 0.0, DT);
+        }
+        assert_eq!(c.output(), 5.0);
+        // The first reversed error leaves the limit at once: 5 + 1000·(-1)·0.001 = 4.
+        assert!((c.update(0.0, 1.0, DT).output - 4.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn deadband_holds_output() {
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(1.0, 100.0, 0.0).with_deadband(5.0))
+                .unwrap();
+        c.update(100.0, 0.0, DT);
+        let held = c.output();
+        assert_eq!(c.update(100.0, 97.0, DT).output, held);
+    }
+
+    #[test]
+    fn td_starts_from_measurement_so_first_call_does_not_jump() {
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(10.0, 0.0, 0.0).with_td(30.0)).unwrap();
+        // Motor at 50 rpm, target 300 rpm: the TD starts at 50, so the error is small at first.
+        let t = c.update(300.0, 50.0, DT);
+        assert_eq!(t.output, 0.0);
+        let t2 = c.update(300.0, 50.0, DT);
+        assert!(t2.output > 0.0 && t2.output < 10.0, "{t2:?}");
+    }
+
+    #[test]
+    fn td_after_long_pause_stays_bounded() {
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(1.0, 1.0, 0.0).with_td(100.0)).unwrap();
+        c.update(0.0, 0.0, DT);
+        let t = c.update(1000.0, 0.0, 5.0); // five seconds without a call
+        assert!(t.output.is_finite());
+        assert!(t.output.abs() <= 1.0 * 1000.0 + 1.0 * 1000.0 * 5.0 + 1e-3);
+    }
+
+    #[test]
+    fn invalid_td_rate_is_rejected() {
+        assert_eq!(
+            IncrementalPid::new(IncrementalPidConfig::new(1.0, 0.0, 0.0).with_td(0.0)).unwrap_err(),
+            PidConfigError::InvalidTrackingRate
+        );
+    }
+
+    #[test]
+    fn reset_zeroes_output() {
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(1.0, 100.0, 0.0)).unwrap();
+        c.update(10.0, 0.0, DT);
+        c.reset();
+        assert_eq!(c.output(), 0.0);
+        c.set_output(3.0);
+        assert_eq!(c.update(0.0, 0.0, DT).output, 3.0);
+    }
+
+    proptest! {
+        #[test]
+        fn output_finite_and_limited_for_any_input(
+            kp in -1e4f32..1e4, ki in -1e4f32..1e4, kd in -10f32..10.0,
+            limit in 0.0f32..1e5, td in proptest::option::of(1.0f32..1e3),
+            steps in proptest::collection::vec(
+                (proptest::num::f32::ANY, proptest::num::f32::ANY, proptest::num::f32::ANY), 1..64),
+        ) {
+            let mut cfg = IncrementalPidConfig::new(kp, ki, kd).with_output_limit(limit);
+            cfg.td_r_rad_s = td;
+            let mut c = IncrementalPid::new(cfg).unwrap();
+            for (target, meas, dt) in steps {
+                let t = c.update(target, meas, dt);
+                prop_assert!(t.output.is_finite() && t.output.abs() <= limit);
+            }
+        }
+    }
+}

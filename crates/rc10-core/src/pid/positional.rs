@@ -1,0 +1,521 @@
+//! Positional PID (RC10_LIB `PID_Position`): trapezoid integral, derivative on measurement,
+//! integral separation, deadband, integral and output limits, circular error for angles.
+
+use super::{ErrorMode, PidConfigError, PidTerms, check_deadband, check_gains, check_limit};
+use crate::filter::LowPass;
+use crate::math::saturate;
+
+/// Configuration of a positional [`Pid`]. Build it with [`PidConfig::new`] and the chainable
+/// `with_*` setters (all `const`, so configurations can be constants).
+///
+/// ```
+/// use rc10_core::pid::{ErrorMode, PidConfig};
+/// const ANGLE_LOOP: PidConfig = PidConfig::new(8.0, 0.0, 0.05)
+///     .with_output_limit(300.0) // rpm: the angle loop commands the speed loop
+///     .with_error_mode(ErrorMode::DEGREES);
+/// assert_eq!(ANGLE_LOOP.output_limit, 300.0);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PidConfig {
+    /// Proportional gain, output units per error unit.
+    pub kp: f32,
+    /// Integral gain, output units per (error unit · second).
+    pub ki: f32,
+    /// Derivative gain, output units per (error unit / second).
+    pub kd: f32,
+    /// `|output| ≤ output_limit`, in output units; `f32::INFINITY` for none.
+    pub output_limit: f32,
+    /// `|i term| ≤ integral_limit`, in output units; `f32::INFINITY` for none.
+    pub integral_limit: f32,
+    /// Integral separation: while `|error| > integral_separation` the integral is **frozen**
+    /// (it neither grows nor decays, and it still contributes its held value to the output).
+    /// RC10_LIB switched the whole I term off instead, which made the output jump at the
+    /// threshold. `f32::INFINITY` disables separation.
+    pub integral_separation: f32,
+    /// Errors with `|error| ≤ deadband` count as zero for P and I (the I term holds, so a
+    /// holding current is kept); D still damps. Outside the band the full error is used.
+    pub deadband: f32,
+    /// Cutoff of a first-order low-pass on the D term in hertz; `0.0` for no filter.
+    pub d_cutoff_hz: f32,
+    /// Linear or circular (angle) error.
+    pub error_mode: ErrorMode,
+}
+
+impl PidConfig {
+    /// Gains with no limits, no separation, no deadband, no D filter and a linear error.
+    pub const fn new(kp: f32, ki: f32, kd: f32) -> Self {
+        Self {
+            kp,
+            ki,
+            kd,
+            output_limit: f32::INFINITY,
+            integral_limit: f32::INFINITY,
+            integral_separation: f32::INFINITY,
+            deadband: 0.0,
+            d_cutoff_hz: 0.0,
+            error_mode: ErrorMode::Linear,
+        }
+    }
+
+    /// Sets [`output_limit`](Self::output_limit).
+    #[must_use]
+    pub const fn with_output_limit(mut self, limit: f32) -> Self {
+        self.output_limit = limit;
+        self
+    }
+
+    /// Sets [`integral_limit`](Self::integral_limit).
+    #[must_use]
+    pub const fn with_integral_limit(mut self, limit: f32) -> Self {
+        self.integral_limit = limit;
+        self
+    }
+
+    /// Sets [`integral_separation`](Self::integral_separation).
+    #[must_use]
+    pub const fn with_integral_separation(mut self, threshold: f32) -> Self {
+        self.integral_separation = threshold;
+        self
+    }
+
+    /// Sets [`deadband`](Self::deadband).
+    #[must_use]
+    pub const fn with_deadband(mut self, deadband: f32) -> Self {
+        self.deadband = deadband;
+        self
+    }
+
+    /// Sets [`d_cutoff_hz`](Self::d_cutoff_hz).
+    #[must_use]
+    pub const fn with_d_cutoff_hz(mut self, cutoff_hz: f32) -> Self {
+        self.d_cutoff_hz = cutoff_hz;
+        self
+    }
+
+    /// Sets [`error_mode`](Self::error_mode).
+    #[must_use]
+    pub const fn with_error_mode(mut self, mode: ErrorMode) -> Self {
+        self.error_mode = mode;
+        self
+    }
+
+    /// Checks that the configuration can work.
+    pub const fn validate(&self) -> Result<(), PidConfigError> {
+        if let Err(e) = check_gains(self.kp, self.ki, self.kd) {
+            return Err(e);
+        }
+        if let Err(e) = check_limit(self.output_limit) {
+            return Err(e);
+        }
+        if let Err(e) = check_limit(self.integral_limit) {
+            return Err(e);
+        }
+        if self.integral_separation.is_nan() || self.integral_separation < 0.0 {
+            return Err(PidConfigError::InvalidSeparation);
+        }
+        if let Err(e) = check_deadband(self.deadband) {
+            return Err(e);
+        }
+        if self.d_cutoff_hz.is_nan() || self.d_cutoff_hz < 0.0 {
+            return Err(PidConfigError::InvalidFilter);
+        }
+        if !self.error_mode.is_valid() {
+            return Err(PidConfigError::InvalidPeriod);
+        }
+        Ok(())
+    }
+}
+
+/// Positional PID controller.
+///
+/// `output = kp·e + I + D + ff`, limited to `±output_limit`, where
+/// - the integral accumulates `ki · (e[k] + e[k-1]) / 2 · dt` (trapezoid rule) and is stored
+///   in output units, so changing `ki` on the fly does not bump the output;
+/// - anti-windup: the integral is limited to `±integral_limit`, frozen during integral
+///   separation, and not grown while the output is saturated in the same direction
+///   (conditional integration);
+/// - `D = -kd · d(measurement)/dt` (derivative on measurement: a target step gives no kick),
+///   optionally low-pass filtered, and computed on the wrapped change in circular mode.
+///
+/// ```
+/// use rc10_core::pid::{Pid, PidConfig};
+/// let mut pid = Pid::new(PidConfig::new(2.0, 0.0, 0.0).with_output_limit(5.0)).unwrap();
+/// let terms = pid.update(10.0, 8.0, 0.001);
+/// assert_eq!(terms.p, 4.0);
+/// assert_eq!(terms.output, 4.0);
+/// assert_eq!(pid.update(10.0, 0.0, 0.001).output, 5.0); // limited
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pid {
+    config: PidConfig,
+    integral: f32,
+    prev_error: Option<f32>,
+    prev_measurement: Option<f32>,
+    d_filter: LowPass,
+    last: PidTerms,
+}
+
+impl Pid {
+    /// A controller with the given configuration, or why the configuration cannot work.
+    pub const fn new(config: PidConfig) -> Result<Self, PidConfigError> {
+        match config.validate() {
+            Ok(()) => Ok(Self {
+                config,
+                integral: 0.0,
+                prev_error: None,
+                prev_measurement: None,
+                d_filter: LowPass::new(config.d_cutoff_hz),
+                last: PidTerms::ZERO,
+            }),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &PidConfig {
+        &self.config
+    }
+
+    /// Replaces the configuration (live tuning), keeping the integral (re-limited) and history.
+    pub fn set_config(&mut self, config: PidConfig) -> Result<(), PidConfigError> {
+        config.validate()?;
+        if config.d_cutoff_hz != self.config.d_cutoff_hz {
+            self.d_filter = LowPass::new(config.d_cutoff_hz);
+        }
+        self.config = config;
+        self.integral = saturate(self.integral, config.integral_limit);
+        Ok(())
+    }
+
+    /// One step without feed-forward; see [`update_with_ff`](Self::update_with_ff).
+    pub fn update(&mut self, target: f32, measurement: f32, dt_s: f32) -> PidTerms {
+        self.update_with_ff(target, measurement, 0.0, dt_s)
+    }
+
+    /// One control step: `target` and `measurement` in the measured unit, `feed_forward` in
+    /// output units, `dt_s` the time since the previous step in seconds.
+    ///
+    /// Non-finite `target`, `measurement` or `feed_forward`: returns [`PidTerms::ZERO`] and
+    /// leaves the state unchanged. A `dt_s` that is not finite and positive keeps the integral
+    /// and the derivative as they were for this step.
+    pub fn update_with_ff(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+    ) -> PidTerms {
+        if !(target.is_finite() && measurement.is_finite() && feed_forward.is_finite()) {
+            return PidTerms::ZERO;
+        }
+        let c = self.config;
+        let raw_error = c.error_mode.diff(target, measurement);
+        let error = if raw_error.abs() <= c.deadband {
+            0.0
+        } else {
+            raw_error
+        };
+        let dt_ok = dt_s.is_finite() && dt_s > 0.0;
+
+        let p = saturate(c.kp * error, f32::INFINITY);
+
+        let d = match self.prev_measurement {
+            Some(prev) if dt_ok => {
+                let change = c.error_mode.diff(measurement, prev);
+                let raw_d = saturate(-c.kd * change / dt_s, f32::INFINITY);
+                self.d_filter.update(raw_d, dt_s)
+            }
+            Some(_) => self.d_filter.output().unwrap_or(0.0),
+            None => 0.0,
+        };
+
+        if dt_ok && c.ki != 0.0 && raw_error.abs() <= c.integral_separation {
+            let prev_error = self.prev_error.unwrap_or(error);
+            let increment = c.ki * 0.5 * (error + prev_error) * dt_s;
+            let candidate = saturate(self.integral + increment, c.integral_limit);
+            let unlimited = p + candidate + d + feed_forward;
+            let winding_up =
+                unlimited.abs() > c.output_limit && (candidate - self.integral) * unlimited > 0.0;
+            if !winding_up {
+                self.integral = candidate;
+            }
+        }
+
+        let output = saturate(p + self.integral + d + feed_forward, c.output_limit);
+        self.prev_error = Some(error);
+        self.prev_measurement = Some(measurement);
+        self.last = PidTerms {
+            p,
+            i: self.integral,
+            d,
+            ff: feed_forward,
+            output,
+        };
+        self.last
+    }
+
+    /// The terms of the most recent accepted step ([`PidTerms::ZERO`] before the first).
+    pub const fn last_terms(&self) -> PidTerms {
+        self.last
+    }
+
+    /// The integral term in output units.
+    pub const fn integral(&self) -> f32 {
+        self.integral
+    }
+
+    /// Sets the integral term (output units, limited to `±integral_limit`; NaN sets zero).
+    ///
+    /// Used for bumpless transfer: when a loop takes over from another mode, preload the
+    /// integral with the output the actuator already has, and the first step continues from it.
+    pub fn set_integral(&mut self, value_out: f32) {
+        self.integral = saturate(value_out, self.config.integral_limit);
+    }
+
+    /// Clears the integral, the error and measurement history and the D filter, so the next
+    /// step behaves like the first (no derivative from stale history).
+    pub fn reset(&mut self) {
+        self.integral = 0.0;
+        self.prev_error = None;
+        self.prev_measurement = None;
+        self.d_filter.reset();
+        self.last = PidTerms::ZERO;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const DT: f32 = 0.001;
+
+    fn pid(config: PidConfig) -> Pid {
+        Pid::new(config).unwrap()
+    }
+
+    #[test]
+    fn new_invalid_config_is_rejected_with_reason() {
+        assert_eq!(
+            Pid::new(PidConfig::new(f32::NAN, 0.0, 0.0)).unwrap_err(),
+            PidConfigError::GainNotFinite
+        );
+        assert_eq!(
+            Pid::new(PidConfig::new(1.0, 0.0, 0.0).with_output_limit(-1.0)).unwrap_err(),
+            PidConfigError::InvalidLimit
+        );
+        assert_eq!(
+            Pid::new(
+                PidConfig::new(1.0, 0.0, 0.0).with_error_mode(ErrorMode::Circular { period: 0.0 })
+            )
+            .unwrap_err(),
+            PidConfigError::InvalidPeriod
+        );
+        assert_eq!(
+            Pid::new(PidConfig::new(1.0, 0.0, 0.0).with_integral_separation(f32::NAN)).unwrap_err(),
+            PidConfigError::InvalidSeparation
+        );
+    }
+
+    #[test]
+    fn integral_uses_trapezoid_rule() {
+        // ki = 10 /s; errors 2 then 4 with dt = 0.1 s.
+        // Step 1: (2 + 2)/2 · 0.1 · 10 = 2.  Step 2: (2 + 4)/2 · 0.1 · 10 = 3 → 5.
+        let mut c = pid(PidConfig::new(0.0, 10.0, 0.0));
+        assert!((c.update(2.0, 0.0, 0.1).i - 2.0).abs() < 1e-6);
+        assert!((c.update(4.0, 0.0, 0.1).i - 5.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn target_step_gives_no_derivative_kick() {
+        let mut c = pid(PidConfig::new(0.0, 0.0, 1.0));
+        c.update(0.0, 5.0, DT);
+        let t = c.update(1000.0, 5.0, DT); // target jumps, measurement does not move
+        assert_eq!(t.d, 0.0);
+    }
+
+    #[test]
+    fn derivative_opposes_measurement_motion() {
+        // Measurement rises 0.01 in 1 ms = 10 units/s; kd = 0.5 → d = -5.
+        let mut c = pid(PidConfig::new(0.0, 0.0, 0.5));
+        c.update(0.0, 0.0, DT);
+        let d = c.update(0.0, 0.01, DT).d;
+        assert!((d + 5.0).abs() < 1e-3, "d = {d}");
+    }
+
+    #[test]
+    fn circular_error_takes_short_way_in_0_360_convention() {
+        let mut c = pid(PidConfig::new(1.0, 0.0, 0.0).with_error_mode(ErrorMode::DEGREES));
+        // From 350° to 10°: +20°, not -340°.
+        assert!((c.update(10.0, 350.0, DT).p - 20.0).abs() < 1e-4);
+        // From 10° to 350°: -20°.
+        assert!((c.update(350.0, 10.0, DT).p + 20.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn circular_error_takes_short_way_in_pm180_convention() {
+        let mut c = pid(PidConfig::new(1.0, 0.0, 0.0).with_error_mode(ErrorMode::DEGREES));
+        assert!((c.update(-170.0, 170.0, DT).p - 20.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn circular_derivative_does_not_spike_when_measurement_wraps() {
+        // 359.5° → 0.5° is a +1° move in 1 ms = 1000 deg/s: d = -kd · 1000 = -1 for kd = 0.001.
+        // A linear derivative would see -359° and give +359.
+        let mut c = pid(PidConfig::new(0.0, 0.0, 0.001).with_error_mode(ErrorMode::DEGREES));
+        c.update(0.0, 359.5, DT);
+        let d = c.update(0.0, 0.5, DT).d;
+        assert!((d + 1.0).abs() < 1e-3, "d = {d}");
+    }
+
+    #[test]
+    fn integral_separation_freezes_but_keeps_integral() {
+        let mut c = pid(PidConfig::new(0.0, 100.0, 0.0).with_integral_separation(10.0));
+        for _ in 0..10 {
+            c.update(5.0, 0.0, DT); // inside the band: integrates
+        }
+        let held = c.integral();
+        assert!(held > 4.0, "integral = {held}");
+        // A large error: the integral stays where it was and still drives the output.
+        let t = c.update(50.0, 0.0, DT);
+        assert_eq!(t.i, held);
+        assert_eq!(t.output, held);
+    }
+
+    #[test]
+    fn deadband_zeroes_p_and_holds_integral() {
+        let mut c = pid(PidConfig::new(2.0, 100.0, 0.0).with_deadband(1.0));
+        c.update(10.0, 0.0, DT);
+        let i = c.integral();
+        let t = c.update(10.0, 9.5, DT); // error 0.5 inside the band
+        assert_eq!(t.p, 0.0);
+        // Trapezoid between the previous 10 and 0 adds half a step: (10 + 0)/2 · 0.001 · 100 = 0.5.
+        assert!((t.i - (i + 0.5)).abs() < 1e-5);
+        let t2 = c.update(10.0, 9.5, DT);
+        assert!(
+            (t2.i - t.i).abs() < 1e-6,
+            "integral must hold inside the band"
+        );
+    }
+
+    #[test]
+    fn output_saturation_stops_windup() {
+        let mut c = pid(PidConfig::new(1.0, 1000.0, 0.0).with_output_limit(10.0));
+        for _ in 0..10_000 {
+            c.update(100.0, 0.0, DT);
+        }
+        // Without anti-windup the integral would be ~1e5; with it the output sits at the limit
+        // and the integral stops as soon as p + i exceeds it.
+        assert!(c.integral() <= 10.0, "integral = {}", c.integral());
+        // Once the error reverses, the output leaves saturation immediately.
+        let t = c.update(0.0, 5.0, DT);
+        assert!(t.output < 10.0, "output = {}", t.output);
+    }
+
+    #[test]
+    fn integral_limit_bounds_i_term() {
+        let mut c = pid(PidConfig::new(0.0, 1000.0, 0.0).with_integral_limit(3.0));
+        for _ in 0..1000 {
+            c.update(1.0, 0.0, DT);
+        }
+        assert_eq!(c.integral(), 3.0);
+    }
+
+    #[test]
+    fn non_finite_input_returns_zero_and_keeps_state() {
+        let mut c = pid(PidConfig::new(1.0, 10.0, 0.1));
+        c.update(5.0, 0.0, DT);
+        let before = c;
+        assert_eq!(c.update(f32::NAN, 0.0, DT), PidTerms::ZERO);
+        assert_eq!(c.update(1.0, f32::INFINITY, DT), PidTerms::ZERO);
+        assert_eq!(c.update_with_ff(1.0, 0.0, f32::NAN, DT), PidTerms::ZERO);
+        assert_eq!(c, before);
+    }
+
+    #[test]
+    fn invalid_dt_freezes_i_and_d() {
+        let mut c = pid(PidConfig::new(1.0, 10.0, 1.0));
+        c.update(5.0, 0.0, DT);
+        let i = c.integral();
+        let t = c.update(5.0, 1.0, 0.0);
+        assert_eq!(t.i, i);
+        assert_eq!(t.d, 0.0);
+        assert!(t.output.is_finite());
+    }
+
+    #[test]
+    fn feed_forward_adds_to_output() {
+        let mut c = pid(PidConfig::new(1.0, 0.0, 0.0).with_output_limit(100.0));
+        let t = c.update_with_ff(3.0, 1.0, 7.0, DT);
+        assert_eq!(t.ff, 7.0);
+        assert_eq!(t.output, 9.0);
+    }
+
+    #[test]
+    fn set_integral_gives_bumpless_start() {
+        let mut c = pid(PidConfig::new(1.0, 10.0, 0.0));
+        c.set_integral(4.0);
+        let t = c.update(0.0, 0.0, DT);
+        assert_eq!(t.output, 4.0);
+    }
+
+    #[test]
+    fn reset_clears_history_so_no_derivative_from_stale_measurement() {
+        let mut c = pid(PidConfig::new(0.0, 1.0, 1.0));
+        c.update(1.0, 0.0, DT);
+        c.reset();
+        let t = c.update(0.0, 100.0, DT);
+        assert_eq!(t.d, 0.0);
+        // Only this step's integral remains: ki · e · dt = 1 · (-100) · 0.001 (the +0.001 from
+        // before the reset is gone).
+        assert!((t.i + 0.1).abs() < 1e-6, "i = {}", t.i);
+    }
+
+    #[test]
+    fn d_filter_smooths_derivative() {
+        let mut raw = pid(PidConfig::new(0.0, 0.0, 1.0));
+        let mut filt = pid(PidConfig::new(0.0, 0.0, 1.0).with_d_cutoff_hz(10.0));
+        raw.update(0.0, 0.0, DT);
+        filt.update(0.0, 0.0, DT);
+        let d_raw = raw.update(0.0, 1.0, DT).d;
+        let d_filt = filt.update(0.0, 1.0, DT).d;
+        assert!((d_raw + 1000.0).abs() < 1e-3);
+        // The first filtered sample initialises the filter to the raw value; after that the
+        // filter responds to changes with alpha = dt / (tau + dt) ≈ 0.059.
+        assert!((d_filt + 1000.0).abs() < 1e-3);
+        let d_filt2 = filt.update(0.0, 1.0, DT).d; // raw derivative now 0
+        assert!((d_filt2 + 1000.0 * (1.0 - 0.0592)).abs() < 1.0, "{d_filt2}");
+    }
+
+    proptest! {
+        #[test]
+        fn output_always_finite_and_within_limits(
+            kp in -1e4f32..1e4, ki in -1e4f32..1e4, kd in -1e2f32..1e2,
+            limit in 0.0f32..1e4,
+            steps in proptest::collection::vec(
+                (proptest::num::f32::ANY, proptest::num::f32::ANY, proptest::num::f32::ANY, proptest::num::f32::ANY),
+                1..64),
+        ) {
+            let mut c = pid(PidConfig::new(kp, ki, kd).with_output_limit(limit).with_d_cutoff_hz(50.0));
+            for (target, meas, ff, dt) in steps {
+                let t = c.update_with_ff(target, meas, ff, dt);
+                prop_assert!(t.output.is_finite());
+                prop_assert!(t.output.abs() <= limit);
+                prop_assert!(t.p.is_finite() && t.i.is_finite() && t.d.is_finite());
+            }
+        }
+
+        #[test]
+        fn circular_mode_output_is_continuous_across_wrap(target in 0.0f32..360.0, meas in 0.0f32..360.0) {
+            // The same physical angle written in [0, 360) or ±180 gives the same error.
+            let mut a = pid(PidConfig::new(1.0, 0.0, 0.0).with_error_mode(ErrorMode::DEGREES));
+            let mut b = pid(PidConfig::new(1.0, 0.0, 0.0).with_error_mode(ErrorMode::DEGREES));
+            let pa = a.update(target, meas, DT).p;
+            let pb = b.update(crate::math::wrap_deg_180(target), crate::math::wrap_deg_180(meas), DT).p;
+            prop_assert!(pa.abs() <= 180.0);
+            // Equal modulo 360 (±180 exactly can flip sign, both are the short way).
+            prop_assert!(crate::math::wrap_deg_180(pa - pb).abs() < 1e-3);
+        }
+    }
+}

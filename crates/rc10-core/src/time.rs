@@ -1,0 +1,148 @@
+//! Control-loop time: turning 64-bit microsecond timestamps into a bounded `dt` in seconds.
+//!
+//! rc10-core never reads a clock. Callers pass the current [`Instant`] (from embassy-time on a
+//! board, from virtual time in the simulator). Differences are taken in integer microseconds
+//! and only then converted to `f32` seconds, so precision does not degrade with uptime: the
+//! `dt` after 100 days is as exact as the `dt` after one second (RC10_LIB's float timestamps
+//! lost resolution after hours).
+
+pub use embassy_time::{Duration, Instant};
+
+/// Computes the `dt` (seconds) between successive control-loop calls, bounded so that the
+/// first call and a call after a gap cannot produce a derivative spike or an integral jump.
+///
+/// - First call (or after [`reset`](Self::reset)): returns the nominal period.
+/// - Time going backwards or standing still: returns the nominal period (a clock glitch must
+///   not produce a zero or negative `dt`).
+/// - A gap longer than `max`: returns `max`.
+///
+/// ```
+/// use rc10_core::time::{DeltaTime, Duration, Instant};
+/// let mut dt = DeltaTime::new(Duration::from_micros(1000), Duration::from_micros(20_000));
+/// assert_eq!(dt.update(Instant::from_micros(5_000_000)), 0.001); // first call: nominal
+/// assert_eq!(dt.update(Instant::from_micros(5_001_500)), 0.0015);
+/// assert_eq!(dt.update(Instant::from_micros(9_000_000)), 0.02); // gap: bounded
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DeltaTime {
+    nominal_us: u64,
+    max_us: u64,
+    last: Option<Instant>,
+}
+
+impl DeltaTime {
+    /// A dt source for a loop that runs every `nominal` and may be late by up to `max`.
+    ///
+    /// `max` below `nominal` is raised to `nominal`; a zero `nominal` is raised to 1 µs.
+    pub const fn new(nominal: Duration, max: Duration) -> Self {
+        let nominal_us = if nominal.as_micros() == 0 {
+            1
+        } else {
+            nominal.as_micros()
+        };
+        let max_us = if max.as_micros() < nominal_us {
+            nominal_us
+        } else {
+            max.as_micros()
+        };
+        Self {
+            nominal_us,
+            max_us,
+            last: None,
+        }
+    }
+
+    /// The nominal period in seconds.
+    pub fn nominal_s(&self) -> f32 {
+        micros_to_s(self.nominal_us)
+    }
+
+    /// Records `now` and returns the bounded time since the previous call, in seconds.
+    pub fn update(&mut self, now: Instant) -> f32 {
+        let dt_us = match self.last {
+            Some(last) if now > last => {
+                let elapsed = now.as_micros() - last.as_micros();
+                elapsed.min(self.max_us)
+            }
+            _ => self.nominal_us,
+        };
+        self.last = Some(now);
+        micros_to_s(dt_us)
+    }
+
+    /// Forgets the previous timestamp: the next call returns the nominal period.
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+}
+
+/// Converts a microsecond count to seconds. Exact for every count below 2^24 µs (16.7 s);
+/// beyond that the relative error stays below 2^-24.
+#[inline]
+pub fn micros_to_s(us: u64) -> f32 {
+    // Split so that large counts keep their relative precision without f64 (soft-float on M4).
+    let whole_s = (us / 1_000_000) as f32;
+    let frac_us = (us % 1_000_000) as f32;
+    whole_s + frac_us * 1e-6
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dt_1khz() -> DeltaTime {
+        DeltaTime::new(Duration::from_micros(1000), Duration::from_micros(10_000))
+    }
+
+    #[test]
+    fn first_call_returns_nominal() {
+        let mut dt = dt_1khz();
+        assert_eq!(dt.update(Instant::from_micros(123_456_789)), 0.001);
+    }
+
+    #[test]
+    fn dt_after_100_days_uptime_is_exact_to_the_microsecond() {
+        // 100 days in µs is 8.64e12: an f32 timestamp would have a resolution of ~1 s here.
+        let t0 = 100 * 86_400 * 1_000_000u64;
+        let mut dt = dt_1khz();
+        dt.update(Instant::from_micros(t0));
+        assert_eq!(dt.update(Instant::from_micros(t0 + 1000)), 0.001);
+        assert_eq!(dt.update(Instant::from_micros(t0 + 1999)), 0.000999);
+    }
+
+    #[test]
+    fn gap_is_bounded_by_max() {
+        let mut dt = dt_1khz();
+        dt.update(Instant::from_micros(0));
+        assert_eq!(dt.update(Instant::from_micros(3_000_000)), 0.01);
+    }
+
+    #[test]
+    fn backwards_or_equal_time_returns_nominal() {
+        let mut dt = dt_1khz();
+        dt.update(Instant::from_micros(5000));
+        assert_eq!(dt.update(Instant::from_micros(5000)), 0.001);
+        assert_eq!(dt.update(Instant::from_micros(4000)), 0.001);
+    }
+
+    #[test]
+    fn reset_makes_next_call_nominal() {
+        let mut dt = dt_1khz();
+        dt.update(Instant::from_micros(0));
+        dt.reset();
+        assert_eq!(dt.update(Instant::from_micros(7_000)), 0.001);
+    }
+
+    #[test]
+    fn max_below_nominal_is_raised() {
+        let mut dt = DeltaTime::new(Duration::from_micros(1000), Duration::from_micros(10));
+        dt.update(Instant::from_micros(0));
+        assert_eq!(dt.update(Instant::from_micros(50_000)), 0.001);
+    }
+
+    #[test]
+    fn micros_to_s_large_values_keep_relative_precision() {
+        let s = micros_to_s(3_600_000_000 + 250_000); // 1 h 0.25 s
+        assert!((s - 3600.25).abs() < 3600.25 * 1.2e-7);
+    }
+}
