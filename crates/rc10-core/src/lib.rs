@@ -3,9 +3,13 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod bus;
+pub mod can;
 pub mod encoder;
 pub mod filter;
 pub mod geometry;
 pub mod math;
+pub mod motor;
+pub mod node;
 pub mod pid;
 pub mod time;

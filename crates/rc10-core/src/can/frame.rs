@@ -1,0 +1,290 @@
+//! The classic CAN frame (standard or extended ID, DLC 0–8) and ID filters.
+
+pub use embedded_can::{ExtendedId, Id, StandardId};
+
+/// A classic CAN 2.0 frame: standard (11-bit) or extended (29-bit) ID, 0–8 data bytes or a
+/// remote request.
+///
+/// Implements [`embedded_can::Frame`], so it converts to and from any HAL's frame type through
+/// that trait. Bytes beyond the DLC are always zero, so two frames with the same ID, DLC and
+/// payload compare equal.
+///
+/// ```
+/// use rc10_core::can::CanFrame;
+/// let f = CanFrame::standard(0x200, &[0x01, 0x02]).unwrap();
+/// assert_eq!(f.raw_id(), 0x200);
+/// assert_eq!(f.data(), &[0x01, 0x02]);
+/// assert!(CanFrame::standard(0x800, &[]).is_none()); // 11-bit IDs stop at 0x7FF
+/// assert!(CanFrame::standard(0x200, &[0; 9]).is_none()); // classic CAN carries at most 8 bytes
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct CanFrame {
+    id: Id,
+    dlc: u8,
+    remote: bool,
+    data: [u8; 8],
+}
+
+impl CanFrame {
+    /// A data frame, or `None` if `data` is longer than 8 bytes.
+    pub fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
+        let mut buf = [0u8; 8];
+        buf.get_mut(..data.len())?.copy_from_slice(data);
+        Some(Self {
+            id: id.into(),
+            dlc: data.len() as u8,
+            remote: false,
+            data: buf,
+        })
+    }
+
+    /// A standard-ID data frame; `None` if `raw_id > 0x7FF` or `data` is longer than 8 bytes.
+    pub fn standard(raw_id: u16, data: &[u8]) -> Option<Self> {
+        Self::new(StandardId::new(raw_id)?, data)
+    }
+
+    /// An extended-ID data frame; `None` if `raw_id > 0x1FFF_FFFF` or `data` is too long.
+    pub fn extended(raw_id: u32, data: &[u8]) -> Option<Self> {
+        Self::new(ExtendedId::new(raw_id)?, data)
+    }
+
+    /// A remote (RTR) frame requesting `dlc` bytes; `None` if `dlc > 8`.
+    pub fn remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
+        if dlc > 8 {
+            return None;
+        }
+        Some(Self {
+            id: id.into(),
+            dlc: dlc as u8,
+            remote: true,
+            data: [0; 8],
+        })
+    }
+
+    /// The ID.
+    pub const fn id(&self) -> Id {
+        self.id
+    }
+
+    /// The raw ID number (11 or 29 bits; see [`is_extended`](Self::is_extended)).
+    pub fn raw_id(&self) -> u32 {
+        match self.id {
+            Id::Standard(id) => u32::from(id.as_raw()),
+            Id::Extended(id) => id.as_raw(),
+        }
+    }
+
+    /// Whether the ID is extended (29-bit).
+    pub const fn is_extended(&self) -> bool {
+        matches!(self.id, Id::Extended(_))
+    }
+
+    /// Whether this is a remote (RTR) frame.
+    pub const fn is_remote(&self) -> bool {
+        self.remote
+    }
+
+    /// Data length code, 0–8.
+    pub const fn dlc(&self) -> usize {
+        self.dlc as usize
+    }
+
+    /// The payload (empty for a remote frame).
+    pub fn data(&self) -> &[u8] {
+        if self.remote {
+            &[]
+        } else {
+            self.data.get(..self.dlc()).unwrap_or(&[])
+        }
+    }
+
+    /// The payload as exactly eight bytes, if the frame is a data frame with DLC 8.
+    /// Most motor protocols require this; a shorter frame is malformed for them.
+    pub fn data8(&self) -> Option<&[u8; 8]> {
+        if !self.remote && self.dlc == 8 {
+            Some(&self.data)
+        } else {
+            None
+        }
+    }
+
+    /// Mutable access to the eight-byte buffer for packing; the DLC is unchanged, and bytes at
+    /// and beyond it are not sent.
+    pub(crate) fn buffer_mut(&mut self) -> &mut [u8; 8] {
+        &mut self.data
+    }
+}
+
+impl embedded_can::Frame for CanFrame {
+    fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
+        CanFrame::new(id, data)
+    }
+
+    fn new_remote(id: impl Into<Id>, dlc: usize) -> Option<Self> {
+        CanFrame::remote(id, dlc)
+    }
+
+    fn is_extended(&self) -> bool {
+        CanFrame::is_extended(self)
+    }
+
+    fn is_remote_frame(&self) -> bool {
+        self.remote
+    }
+
+    fn id(&self) -> Id {
+        self.id
+    }
+
+    fn dlc(&self) -> usize {
+        CanFrame::dlc(self)
+    }
+
+    fn data(&self) -> &[u8] {
+        CanFrame::data(self)
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for CanFrame {
+    fn format(&self, f: defmt::Formatter) {
+        if self.is_extended() {
+            defmt::write!(
+                f,
+                "{=u32:#010x} [{}] {=[u8]:02x}",
+                self.raw_id(),
+                self.dlc,
+                self.data()
+            )
+        } else {
+            defmt::write!(
+                f,
+                "{=u32:#05x} [{}] {=[u8]:02x}",
+                self.raw_id(),
+                self.dlc,
+                self.data()
+            )
+        }
+    }
+}
+
+/// An acceptance filter, like a CAN controller's mask filter: an ID of the given kind matches
+/// when `(raw_id & mask) == (id & mask)`.
+///
+/// Devices declare the filter they listen on; the bus uses it to route frames and to reject,
+/// at registration, two devices that would both claim one ID.
+///
+/// ```
+/// use rc10_core::can::{CanFrame, IdFilter};
+/// let m3508_1 = IdFilter::standard(0x201);
+/// assert!(m3508_1.matches(CanFrame::standard(0x201, &[0; 8]).unwrap().id()));
+/// // A VESC with controller id 7 answers on extended IDs (packet << 8) | 7.
+/// let vesc_7 = IdFilter::extended_masked(0x07, 0xFF);
+/// assert!(vesc_7.matches(CanFrame::extended(0x0907, &[0; 8]).unwrap().id()));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IdFilter {
+    /// Whether the filter matches extended (29-bit) IDs; standard IDs otherwise.
+    pub extended: bool,
+    /// The ID bits to compare.
+    pub id: u32,
+    /// Which bits are compared (1 = must equal).
+    pub mask: u32,
+}
+
+impl IdFilter {
+    /// Exactly one standard ID.
+    pub const fn standard(raw_id: u16) -> Self {
+        Self {
+            extended: false,
+            id: raw_id as u32,
+            mask: 0x7FF,
+        }
+    }
+
+    /// Exactly one extended ID.
+    pub const fn extended(raw_id: u32) -> Self {
+        Self {
+            extended: true,
+            id: raw_id,
+            mask: 0x1FFF_FFFF,
+        }
+    }
+
+    /// Extended IDs whose bits under `mask` equal `raw_id`'s.
+    pub const fn extended_masked(raw_id: u32, mask: u32) -> Self {
+        Self {
+            extended: true,
+            id: raw_id & mask,
+            mask,
+        }
+    }
+
+    /// Whether `id` passes the filter.
+    pub fn matches(&self, id: Id) -> bool {
+        match id {
+            Id::Standard(s) if !self.extended => {
+                (u32::from(s.as_raw()) ^ self.id) & self.mask & 0x7FF == 0
+            }
+            Id::Extended(e) if self.extended => (e.as_raw() ^ self.id) & self.mask == 0,
+            _ => false,
+        }
+    }
+
+    /// Whether some ID passes both filters.
+    pub const fn overlaps(&self, other: &Self) -> bool {
+        self.extended == other.extended && (self.id ^ other.id) & self.mask & other.mask == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use embedded_can::Frame as _;
+
+    #[test]
+    fn frame_pads_beyond_dlc_with_zero_and_compares_by_content() {
+        let a = CanFrame::standard(0x123, &[1, 2, 3]).unwrap();
+        let b = CanFrame::standard(0x123, &[1, 2, 3]).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a.dlc(), 3);
+        assert_eq!(a.data8(), None);
+    }
+
+    #[test]
+    fn embedded_can_trait_round_trips() {
+        let id = ExtendedId::new(0x1234_5678 & 0x1FFF_FFFF).unwrap();
+        let f = <CanFrame as embedded_can::Frame>::new(id, &[9, 8]).unwrap();
+        assert!(f.is_extended());
+        assert_eq!(embedded_can::Frame::data(&f), &[9, 8]);
+        let r = CanFrame::new_remote(StandardId::new(0x10).unwrap(), 4).unwrap();
+        assert!(r.is_remote_frame());
+        assert_eq!(r.dlc(), 4);
+        assert_eq!(embedded_can::Frame::data(&r), &[] as &[u8]);
+        assert!(CanFrame::remote(StandardId::ZERO, 9).is_none());
+    }
+
+    #[test]
+    fn extended_id_limit_enforced() {
+        assert!(CanFrame::extended(0x2000_0000, &[]).is_none());
+        assert!(CanFrame::extended(0x1FFF_FFFF, &[]).is_some());
+    }
+
+    #[test]
+    fn filter_kinds_do_not_cross() {
+        let std_filter = IdFilter::standard(0x201);
+        assert!(!std_filter.matches(CanFrame::extended(0x201, &[]).unwrap().id()));
+        assert!(!IdFilter::extended(0x201).overlaps(&std_filter));
+    }
+
+    #[test]
+    fn masked_filters_overlap_when_some_id_matches_both() {
+        let vesc_7 = IdFilter::extended_masked(0x07, 0xFF);
+        let exact = IdFilter::extended(0x0907);
+        assert!(vesc_7.overlaps(&exact));
+        assert!(!vesc_7.overlaps(&IdFilter::extended_masked(0x08, 0xFF)));
+        assert!(IdFilter::standard(0x205).overlaps(&IdFilter::standard(0x205)));
+        assert!(!IdFilter::standard(0x205).overlaps(&IdFilter::standard(0x206)));
+    }
+}

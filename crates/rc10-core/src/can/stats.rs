@@ -1,0 +1,337 @@
+//! Per-bus statistics: cumulative counters readable at any time from any task, and per-second
+//! rates (frames/s, bus load %) latched by the scheduler tick.
+//!
+//! Counters are `AtomicU32`s (native on Cortex-M4; they wrap after 2^32 events, about 50 days
+//! of 1 kHz frames on eight motors, so compare snapshots with wrapping subtraction as
+//! [`BusCounters::since`] does). Rates are computed from two snapshots one window apart.
+
+use crate::time::{Duration, Instant, micros_to_s};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+
+/// Live counters of one bus. All methods take `&self` and never block.
+#[derive(Debug, Default)]
+pub struct BusStats {
+    rx_frames: AtomicU32,
+    rx_bits: AtomicU32,
+    rx_unmatched: AtomicU32,
+    rx_rejected: AtomicU32,
+    rx_overruns: AtomicU32,
+    bus_errors: AtomicU32,
+    tx_frames: AtomicU32,
+    tx_bits: AtomicU32,
+    tx_full: AtomicU32,
+    tx_bus_off: AtomicU32,
+    tx_batch_overflow: AtomicU32,
+    bus_off_events: AtomicU32,
+    ticks: AtomicU32,
+    bus_off_now: AtomicBool,
+}
+
+macro_rules! bump {
+    ($field:expr) => {
+        $field.fetch_add(1, Ordering::Relaxed)
+    };
+    ($field:expr, $n:expr) => {
+        $field.fetch_add($n, Ordering::Relaxed)
+    };
+}
+
+impl BusStats {
+    /// All counters zero.
+    pub const fn new() -> Self {
+        Self {
+            rx_frames: AtomicU32::new(0),
+            rx_bits: AtomicU32::new(0),
+            rx_unmatched: AtomicU32::new(0),
+            rx_rejected: AtomicU32::new(0),
+            rx_overruns: AtomicU32::new(0),
+            bus_errors: AtomicU32::new(0),
+            tx_frames: AtomicU32::new(0),
+            tx_bits: AtomicU32::new(0),
+            tx_full: AtomicU32::new(0),
+            tx_bus_off: AtomicU32::new(0),
+            tx_batch_overflow: AtomicU32::new(0),
+            bus_off_events: AtomicU32::new(0),
+            ticks: AtomicU32::new(0),
+            bus_off_now: AtomicBool::new(false),
+        }
+    }
+
+    pub(crate) fn record_rx(&self, bits: u32) {
+        bump!(self.rx_frames);
+        bump!(self.rx_bits, bits);
+    }
+    pub(crate) fn record_unmatched(&self) {
+        bump!(self.rx_unmatched);
+    }
+    pub(crate) fn record_rejected(&self) {
+        bump!(self.rx_rejected);
+    }
+    pub(crate) fn record_overrun(&self) {
+        bump!(self.rx_overruns);
+    }
+    pub(crate) fn record_bus_error(&self) {
+        bump!(self.bus_errors);
+    }
+    pub(crate) fn record_tx(&self, bits: u32) {
+        bump!(self.tx_frames);
+        bump!(self.tx_bits, bits);
+    }
+    pub(crate) fn record_tx_full(&self) {
+        bump!(self.tx_full);
+    }
+    pub(crate) fn record_tx_bus_off(&self) {
+        bump!(self.tx_bus_off);
+    }
+    pub(crate) fn record_batch_overflow(&self, n: u32) {
+        bump!(self.tx_batch_overflow, n);
+    }
+    pub(crate) fn record_tick(&self) {
+        bump!(self.ticks);
+    }
+
+    /// Records the controller's bus-off flag; counts an event on each entry into bus-off.
+    pub(crate) fn record_bus_off_state(&self, bus_off: bool) {
+        let was = self.bus_off_now.swap(bus_off, Ordering::Relaxed);
+        if bus_off && !was {
+            bump!(self.bus_off_events);
+        }
+    }
+
+    /// Whether the controller was bus-off at the last check.
+    pub fn is_bus_off(&self) -> bool {
+        self.bus_off_now.load(Ordering::Relaxed)
+    }
+
+    /// A consistent-enough copy of every counter (each read is atomic; the set is not).
+    pub fn snapshot(&self) -> BusCounters {
+        let l = |a: &AtomicU32| a.load(Ordering::Relaxed);
+        BusCounters {
+            rx_frames: l(&self.rx_frames),
+            rx_bits: l(&self.rx_bits),
+            rx_unmatched: l(&self.rx_unmatched),
+            rx_rejected: l(&self.rx_rejected),
+            rx_overruns: l(&self.rx_overruns),
+            bus_errors: l(&self.bus_errors),
+            tx_frames: l(&self.tx_frames),
+            tx_bits: l(&self.tx_bits),
+            tx_full: l(&self.tx_full),
+            tx_bus_off: l(&self.tx_bus_off),
+            tx_batch_overflow: l(&self.tx_batch_overflow),
+            bus_off_events: l(&self.bus_off_events),
+            ticks: l(&self.ticks),
+        }
+    }
+}
+
+/// A copy of a bus's counters at one moment (all cumulative since start, wrapping at 2^32).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BusCounters {
+    /// Frames received (all, matched or not).
+    pub rx_frames: u32,
+    /// Bits of received frames, stuffing included.
+    pub rx_bits: u32,
+    /// Received frames no registered device claimed.
+    pub rx_unmatched: u32,
+    /// Frames a device claimed but rejected as malformed (wrong DLC, bad values).
+    pub rx_rejected: u32,
+    /// RX FIFO overruns reported by the transport.
+    pub rx_overruns: u32,
+    /// Bus protocol errors reported by the transport.
+    pub bus_errors: u32,
+    /// Frames queued for transmission.
+    pub tx_frames: u32,
+    /// Bits of queued frames, stuffing included.
+    pub tx_bits: u32,
+    /// Frames not queued because the TX buffers were full.
+    pub tx_full: u32,
+    /// Frames not queued because the controller was bus-off.
+    pub tx_bus_off: u32,
+    /// Frames the devices tried to pack beyond the per-tick batch capacity.
+    pub tx_batch_overflow: u32,
+    /// Times the controller entered bus-off.
+    pub bus_off_events: u32,
+    /// Scheduler ticks run.
+    pub ticks: u32,
+}
+
+impl BusCounters {
+    /// Frames that should have gone out but did not (TX full, bus-off, batch overflow).
+    pub const fn tx_dropped(&self) -> u32 {
+        self.tx_full
+            .wrapping_add(self.tx_bus_off)
+            .wrapping_add(self.tx_batch_overflow)
+    }
+
+    /// The counts between `earlier` and `self` (wrapping subtraction, field by field).
+    pub const fn since(&self, earlier: &Self) -> Self {
+        Self {
+            rx_frames: self.rx_frames.wrapping_sub(earlier.rx_frames),
+            rx_bits: self.rx_bits.wrapping_sub(earlier.rx_bits),
+            rx_unmatched: self.rx_unmatched.wrapping_sub(earlier.rx_unmatched),
+            rx_rejected: self.rx_rejected.wrapping_sub(earlier.rx_rejected),
+            rx_overruns: self.rx_overruns.wrapping_sub(earlier.rx_overruns),
+            bus_errors: self.bus_errors.wrapping_sub(earlier.bus_errors),
+            tx_frames: self.tx_frames.wrapping_sub(earlier.tx_frames),
+            tx_bits: self.tx_bits.wrapping_sub(earlier.tx_bits),
+            tx_full: self.tx_full.wrapping_sub(earlier.tx_full),
+            tx_bus_off: self.tx_bus_off.wrapping_sub(earlier.tx_bus_off),
+            tx_batch_overflow: self
+                .tx_batch_overflow
+                .wrapping_sub(earlier.tx_batch_overflow),
+            bus_off_events: self.bus_off_events.wrapping_sub(earlier.bus_off_events),
+            ticks: self.ticks.wrapping_sub(earlier.ticks),
+        }
+    }
+
+    /// Rates over `elapsed`, given these counts are the difference over that interval.
+    pub fn rates(&self, elapsed: Duration, bitrate_bps: u32) -> BusRates {
+        let s = micros_to_s(elapsed.as_micros());
+        if s <= 0.0 {
+            return BusRates::default();
+        }
+        let bits = self.rx_bits.wrapping_add(self.tx_bits) as f32;
+        BusRates {
+            rx_frames_per_s: self.rx_frames as f32 / s,
+            tx_frames_per_s: self.tx_frames as f32 / s,
+            tx_dropped_per_s: self.tx_dropped() as f32 / s,
+            load_percent: 100.0 * bits / (bitrate_bps.max(1) as f32 * s),
+        }
+    }
+}
+
+/// Per-second figures of a bus.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BusRates {
+    /// Frames received per second.
+    pub rx_frames_per_s: f32,
+    /// Frames sent per second.
+    pub tx_frames_per_s: f32,
+    /// Frames dropped on the TX side per second.
+    pub tx_dropped_per_s: f32,
+    /// Share of the bus's bit time used by the frames this node saw and sent, in percent.
+    pub load_percent: f32,
+}
+
+/// Latches [`BusRates`] once per window from successive snapshots (owned by the tick).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RateWindow {
+    start: Option<(Instant, BusCounters)>,
+    latched: BusRates,
+}
+
+impl RateWindow {
+    pub(crate) const fn new() -> Self {
+        Self {
+            start: None,
+            latched: BusRates {
+                rx_frames_per_s: 0.0,
+                tx_frames_per_s: 0.0,
+                tx_dropped_per_s: 0.0,
+                load_percent: 0.0,
+            },
+        }
+    }
+
+    pub(crate) fn latched(&self) -> BusRates {
+        self.latched
+    }
+
+    pub(crate) fn update(
+        &mut self,
+        now: Instant,
+        counters: BusCounters,
+        window: Duration,
+        bitrate_bps: u32,
+    ) {
+        match self.start {
+            Some((t0, c0)) if now >= t0 => {
+                let elapsed = now - t0;
+                if elapsed >= window {
+                    self.latched = counters.since(&c0).rates(elapsed, bitrate_bps);
+                    self.start = Some((now, counters));
+                }
+            }
+            _ => self.start = Some((now, counters)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn since_wraps_across_u32_overflow() {
+        let a = BusCounters {
+            rx_frames: u32::MAX - 1,
+            ..Default::default()
+        };
+        let b = BusCounters {
+            rx_frames: 3,
+            ..Default::default()
+        };
+        assert_eq!(b.since(&a).rx_frames, 5);
+    }
+
+    #[test]
+    fn rates_from_known_counts() {
+        // 4000 frames of 111 bits in 1 s at 1 Mbit/s = 44.4 % load.
+        let c = BusCounters {
+            rx_frames: 3000,
+            rx_bits: 3000 * 111,
+            tx_frames: 1000,
+            tx_bits: 1000 * 111,
+            tx_full: 10,
+            ..Default::default()
+        };
+        let r = c.rates(Duration::from_secs(1), 1_000_000);
+        assert_eq!(r.rx_frames_per_s, 3000.0);
+        assert_eq!(r.tx_frames_per_s, 1000.0);
+        assert_eq!(r.tx_dropped_per_s, 10.0);
+        assert!((r.load_percent - 44.4).abs() < 1e-3);
+    }
+
+    #[test]
+    fn bus_off_counts_entries_not_ticks() {
+        let s = BusStats::new();
+        s.record_bus_off_state(true);
+        s.record_bus_off_state(true);
+        s.record_bus_off_state(false);
+        s.record_bus_off_state(true);
+        assert_eq!(s.snapshot().bus_off_events, 2);
+        assert!(s.is_bus_off());
+    }
+
+    #[test]
+    fn window_latches_after_one_period() {
+        let stats = BusStats::new();
+        let mut w = RateWindow::new();
+        w.update(
+            Instant::from_micros(0),
+            stats.snapshot(),
+            Duration::from_secs(1),
+            1_000_000,
+        );
+        for _ in 0..500 {
+            stats.record_tx(100);
+        }
+        w.update(
+            Instant::from_millis(500),
+            stats.snapshot(),
+            Duration::from_secs(1),
+            1_000_000,
+        );
+        assert_eq!(w.latched().tx_frames_per_s, 0.0); // window not complete
+        w.update(
+            Instant::from_millis(1000),
+            stats.snapshot(),
+            Duration::from_secs(1),
+            1_000_000,
+        );
+        assert_eq!(w.latched().tx_frames_per_s, 500.0);
+        assert!((w.latched().load_percent - 5.0).abs() < 1e-4);
+    }
+}

@@ -1,0 +1,124 @@
+//! The transport traits a CAN peripheral (or the simulator, or a test loopback) implements.
+//!
+//! They are deliberately small. Sending is non-blocking only ([`CanTransmit::try_send`]): the
+//! 1 kHz tick must never wait for the bus, so a full TX queue is reported and counted, not
+//! waited on. Receiving is async ([`CanReceive::receive`]) and carries the reception time, so
+//! feedback is stamped when it arrived, not when a task got round to it.
+
+use super::CanFrame;
+use crate::time::Instant;
+use core::fmt;
+
+/// Why a frame could not be queued for transmission.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SendError {
+    /// Every TX buffer is in use (3 on an STM32G4 FDCAN); the frame was not queued.
+    Full,
+    /// The controller is bus-off and sends nothing until it recovers.
+    BusOff,
+}
+
+impl fmt::Display for SendError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Full => "CAN TX queue full",
+            Self::BusOff => "CAN controller is bus-off",
+        })
+    }
+}
+
+impl core::error::Error for SendError {}
+
+/// A receive-side problem reported instead of a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ReceiveError {
+    /// The RX FIFO overflowed: at least one frame was lost.
+    Overrun,
+    /// The controller is bus-off.
+    BusOff,
+    /// A protocol error (stuff, form, CRC, ACK, bit) was seen on the bus.
+    BusError,
+}
+
+impl fmt::Display for ReceiveError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Overrun => "CAN RX FIFO overrun: frames lost",
+            Self::BusOff => "CAN controller is bus-off",
+            Self::BusError => "CAN protocol error on the bus",
+        })
+    }
+}
+
+impl core::error::Error for ReceiveError {}
+
+/// The controller's fault-confinement state (ISO 11898-1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ErrorState {
+    /// Both error counters below 128: normal operation.
+    #[default]
+    Active,
+    /// An error counter at 128 or above: the node still works but signals errors passively.
+    Passive,
+    /// TX error counter above 255: the node is off the bus until it recovers.
+    BusOff,
+}
+
+/// Error state and counters of a CAN controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BusStatus {
+    /// Fault-confinement state.
+    pub state: ErrorState,
+    /// Transmit error counter (0–255).
+    pub tx_error_count: u8,
+    /// Receive error counter (0–127, 128 meaning "passive").
+    pub rx_error_count: u8,
+}
+
+/// A received frame and when it arrived.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Received {
+    /// The frame.
+    pub frame: CanFrame,
+    /// Reception time (the peripheral's timestamp, or the time the driver saw it).
+    pub timestamp: Instant,
+}
+
+/// The sending half of a CAN transport.
+pub trait CanTransmit {
+    /// Queues `frame` for transmission without waiting.
+    fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError>;
+
+    /// Current error state and counters. Transports that cannot tell report error-active.
+    fn status(&self) -> BusStatus {
+        BusStatus::default()
+    }
+}
+
+/// The receiving half of a CAN transport.
+#[allow(async_fn_in_trait)] // Used through generics in Embassy tasks; no Send bound is wanted.
+pub trait CanReceive {
+    /// Waits for the next frame, or reports why frames were lost.
+    async fn receive(&mut self) -> Result<Received, ReceiveError>;
+}
+
+impl<T: CanTransmit + ?Sized> CanTransmit for &mut T {
+    fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
+        (**self).try_send(frame)
+    }
+
+    fn status(&self) -> BusStatus {
+        (**self).status()
+    }
+}
+
+impl<T: CanReceive + ?Sized> CanReceive for &mut T {
+    async fn receive(&mut self) -> Result<Received, ReceiveError> {
+        (**self).receive().await
+    }
+}

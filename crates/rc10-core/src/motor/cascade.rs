@@ -1,0 +1,286 @@
+//! The angle → speed → command cascade that runs on the MCU for motors whose ESC takes a
+//! current or voltage command (DJI). Reusable by user-written motors.
+//!
+//! - Speed mode: the speed loop turns rpm error into the command (amps or volts).
+//! - Angle / total-angle mode: the angle loop, run every `angle_divider` ticks (RC10_LIB: every
+//!   10th), turns degrees of error into a speed target for the speed loop. Angle mode uses a
+//!   circular error (shortest way round); total-angle mode a linear one.
+//! - Mode switches are bumpless: a loop that takes over starts from the command the motor
+//!   already has, so the output does not jump; a loop that is left is reset.
+
+use super::ControlMode;
+use crate::math::wrap_deg_360;
+use crate::pid::{ErrorMode, Pid, PidConfig, PidConfigError, PidTerms};
+
+/// Gains and structure of a [`Cascade`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CascadeConfig {
+    /// Speed loop: rpm in, command (amps or volts) out. Its output limit is the command limit.
+    pub speed: PidConfig,
+    /// Angle loop: degrees in, rpm out. Its error mode is set by the cascade (circular for
+    /// angle mode, linear for total-angle mode).
+    pub angle: PidConfig,
+    /// The angle loop runs every this many ticks (1 = every tick; 0 is treated as 1).
+    pub angle_divider: u8,
+}
+
+/// What the cascade measures each tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Measured {
+    /// Output-shaft speed in rpm.
+    pub speed_rpm: f32,
+    /// Output-shaft angle in [0, 360) degrees.
+    pub angle_deg: f32,
+    /// Output-shaft multi-turn angle in degrees.
+    pub total_angle_deg: f32,
+}
+
+/// The cascade's state: mode, target and the two loops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cascade {
+    config: CascadeConfig,
+    mode: ControlMode,
+    target: f32,
+    speed: Pid,
+    angle: Pid,
+    ticks_since_angle: u8,
+    angle_dt_s: f32,
+    speed_target_rpm: f32,
+    output: f32,
+}
+
+impl Cascade {
+    /// A disabled cascade, or why a loop's configuration cannot work.
+    pub const fn new(config: CascadeConfig) -> Result<Self, PidConfigError> {
+        let speed = match Pid::new(config.speed) {
+            Ok(p) => p,
+            Err(e) => return Err(e),
+        };
+        let angle = match Pid::new(config.angle.with_error_mode(ErrorMode::DEGREES)) {
+            Ok(p) => p,
+            Err(e) => return Err(e),
+        };
+        Ok(Self {
+            config,
+            mode: ControlMode::Disabled,
+            target: 0.0,
+            speed,
+            angle,
+            ticks_since_angle: 0,
+            angle_dt_s: 0.0,
+            speed_target_rpm: 0.0,
+            output: 0.0,
+        })
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &CascadeConfig {
+        &self.config
+    }
+
+    /// The mode.
+    pub const fn mode(&self) -> ControlMode {
+        self.mode
+    }
+
+    /// The target in the mode's unit.
+    pub const fn target(&self) -> f32 {
+        self.target
+    }
+
+    /// The speed target the angle loop produced last (rpm), or the speed target in speed mode.
+    pub const fn speed_target_rpm(&self) -> f32 {
+        self.speed_target_rpm
+    }
+
+    /// The speed loop's last per-term output (for tuning).
+    pub const fn speed_terms(&self) -> PidTerms {
+        self.speed.last_terms()
+    }
+
+    /// The angle loop's last per-term output (for tuning).
+    pub const fn angle_terms(&self) -> PidTerms {
+        self.angle.last_terms()
+    }
+
+    /// Sets mode and target. A change of mode resets the loops that start working, preloading
+    /// the speed loop with the present command (bumpless). The target must be finite (callers
+    /// check; a non-finite target is ignored here).
+    pub fn set_target(&mut self, mode: ControlMode, target: f32) {
+        if !target.is_finite() {
+            return;
+        }
+        let target = if mode == ControlMode::Angle {
+            wrap_deg_360(target)
+        } else {
+            target
+        };
+        if mode != self.mode {
+            let uses_speed = |m: ControlMode| {
+                matches!(
+                    m,
+                    ControlMode::Speed | ControlMode::Angle | ControlMode::TotalAngle
+                )
+            };
+            if uses_speed(mode) && !uses_speed(self.mode) {
+                self.speed.reset();
+                self.speed.set_integral(self.output);
+            }
+            if matches!(mode, ControlMode::Angle | ControlMode::TotalAngle) {
+                let error_mode = if mode == ControlMode::Angle {
+                    ErrorMode::DEGREES
+                } else {
+                    ErrorMode::Linear
+                };
+                // Same gains, new error mode: cannot fail, the gains were validated.
+                let _ = self
+                    .angle
+                    .set_config(self.config.angle.with_error_mode(error_mode));
+                self.angle.reset();
+                // Run the angle loop on the first tick in the new mode.
+                self.ticks_since_angle = u8::MAX;
+                self.angle_dt_s = 0.0;
+            }
+            if mode == ControlMode::Disabled {
+                self.output = 0.0;
+            }
+            self.mode = mode;
+        }
+        self.target = target;
+    }
+
+    /// Forgets loop history and the present command (used when the motor goes offline); mode
+    /// and target stay.
+    pub fn reset(&mut self) {
+        self.speed.reset();
+        self.angle.reset();
+        self.output = 0.0;
+        self.speed_target_rpm = 0.0;
+        self.ticks_since_angle = u8::MAX;
+        self.angle_dt_s = 0.0;
+    }
+
+    /// One tick: returns the command (amps or volts), limited by the speed loop's output limit
+    /// in closed-loop modes. In current / voltage mode the target is returned as is (the
+    /// driver clamps it to the ESC's range).
+    pub fn step(&mut self, m: &Measured, dt_s: f32) -> f32 {
+        self.output = match self.mode {
+            ControlMode::Disabled => 0.0,
+            ControlMode::Current | ControlMode::Voltage => self.target,
+            ControlMode::Speed => {
+                self.speed_target_rpm = self.target;
+                self.speed.update(self.target, m.speed_rpm, dt_s).output
+            }
+            ControlMode::Angle | ControlMode::TotalAngle => {
+                self.angle_dt_s += dt_s;
+                let divider = self.config.angle_divider.max(1);
+                self.ticks_since_angle = self.ticks_since_angle.saturating_add(1);
+                if self.ticks_since_angle >= divider {
+                    let measured = if self.mode == ControlMode::Angle {
+                        m.angle_deg
+                    } else {
+                        m.total_angle_deg
+                    };
+                    self.speed_target_rpm = self
+                        .angle
+                        .update(self.target, measured, self.angle_dt_s)
+                        .output;
+                    self.ticks_since_angle = 0;
+                    self.angle_dt_s = 0.0;
+                }
+                self.speed
+                    .update(self.speed_target_rpm, m.speed_rpm, dt_s)
+                    .output
+            }
+        };
+        self.output
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cascade() -> Cascade {
+        Cascade::new(CascadeConfig {
+            speed: PidConfig::new(0.1, 10.0, 0.0).with_output_limit(20.0),
+            angle: PidConfig::new(10.0, 0.0, 0.0).with_output_limit(300.0),
+            angle_divider: 10,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn speed_mode_outputs_speed_loop() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Speed, 100.0);
+        // p = 0.1·100 = 10; i = 10·100·0.001 = 1 (first trapezoid step uses e for both ends).
+        let out = c.step(&Measured::default(), 0.001);
+        assert!((out - 11.0).abs() < 1e-4, "{out}");
+    }
+
+    #[test]
+    fn switch_from_current_to_speed_is_bumpless() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Current, 5.0);
+        assert_eq!(c.step(&Measured::default(), 0.001), 5.0);
+        // Speed target equal to the measured speed: the output must stay at 5 A.
+        c.set_target(ControlMode::Speed, 50.0);
+        let m = Measured {
+            speed_rpm: 50.0,
+            ..Default::default()
+        };
+        assert!((c.step(&m, 0.001) - 5.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn angle_loop_runs_every_divider_ticks_with_accumulated_dt() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Angle, 10.0);
+        let m = Measured::default();
+        c.step(&m, 0.001);
+        assert!((c.speed_target_rpm() - 100.0).abs() < 1e-4); // first tick runs the angle loop
+        let m2 = Measured {
+            angle_deg: 5.0,
+            ..Default::default()
+        };
+        for _ in 0..9 {
+            c.step(&m2, 0.001);
+            assert!(
+                (c.speed_target_rpm() - 100.0).abs() < 1e-4,
+                "held between runs"
+            );
+        }
+        c.step(&m2, 0.001);
+        assert!((c.speed_target_rpm() - 50.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn angle_mode_goes_short_way_total_angle_mode_does_not() {
+        let mut c = cascade();
+        let m = Measured {
+            angle_deg: 350.0,
+            total_angle_deg: 350.0,
+            ..Default::default()
+        };
+        c.set_target(ControlMode::Angle, 370.0); // = 10°: +20° from 350°
+        c.step(&m, 0.001);
+        assert!((c.speed_target_rpm() - 200.0).abs() < 1e-3);
+        c.set_target(ControlMode::TotalAngle, 10.0); // -340° the linear way: limited to -300
+        c.step(&m, 0.001);
+        assert!((c.speed_target_rpm() + 300.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn disabled_outputs_zero_and_reset_clears_command() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Current, 3.0);
+        c.step(&Measured::default(), 0.001);
+        c.set_target(ControlMode::Disabled, 0.0);
+        assert_eq!(c.step(&Measured::default(), 0.001), 0.0);
+        c.set_target(ControlMode::Speed, 0.0);
+        c.reset();
+        assert_eq!(c.step(&Measured::default(), 0.001), 0.0);
+    }
+}

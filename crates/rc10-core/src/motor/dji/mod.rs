@@ -1,0 +1,526 @@
+//! DJI RoboMaster motors: C620 + M3508, C610 + M2006, GM6020 (voltage or current mode).
+//!
+//! Protocol (DJI user guides; see SPEC.md "Protocol facts"):
+//!
+//! | model | ESC ids | command ID, slot | command range | feedback ID |
+//! |---|---|---|---|---|
+//! | C620 + M3508 | 1–8 | 0x200 (ids 1–4) / 0x1FF (5–8), slot `(id-1) % 4` | ±16384 ↔ ±20 A | 0x200 + id |
+//! | C610 + M2006 | 1–8 | same as C620 | ±10000 ↔ ±10 A | 0x200 + id |
+//! | GM6020 voltage | 1–7 | 0x1FF (1–4) / 0x2FF (5–7) | ±`voltage_raw_limit` (default 25000) | 0x204 + id |
+//! | GM6020 current | 1–7 | 0x1FE (1–4) / 0x2FE (5–7) | ±16384 ↔ ±3 A | 0x204 + id |
+//!
+//! Command slots are int16 big-endian. Feedback (1 kHz, DLC 8): D0–1 rotor angle 0–8191,
+//! D2–3 rotor speed rpm (i16), D4–5 torque current (i16, same scale as the command), D6
+//! temperature °C (not on the C610), all big-endian. Speeds and angles are converted once, on
+//! reception, to the output shaft through the exact gear ratio.
+//!
+//! GM6020 voltage range: the 2018 manual and DJI's examples give ±30000; newer motor firmware
+//! is reported (third-party) to saturate at ±25000. rc10 defaults to ±25000, which is safe on
+//! both, and lets you raise it ([`DjiConfig::voltage_raw_limit`]). Volts are converted at
+//! 30000 ↔ 24 V (the 2018 manual's full scale at the rated supply; derived).
+//!
+//! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
+//! with the same command ID into one frame per tick, and slots no motor uses are sent as zero.
+//! Registration rejects two motors that would share a slot or a feedback ID (for example an
+//! M3508 with id 5 and a GM6020 with id 1 both answer on 0x205).
+
+use super::cascade::{Cascade, CascadeConfig, Measured};
+use super::{ControlMode, HealthConfig, Motor, MotorState, TargetError, ThermalLimits};
+use crate::can::{CanFrame, IdFilter};
+use crate::encoder::{Encoder, EncoderConfig, GearRatio, Origin};
+use crate::math::saturate;
+use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
+use crate::pid::{PidConfig, PidConfigError};
+use crate::time::Instant;
+use core::cell::RefCell;
+use core::fmt;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+/// Which DJI motor and ESC, and for the GM6020 which command mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DjiModel {
+    /// M3508 P19 with the C620 ESC.
+    M3508,
+    /// M2006 P36 with the C610 ESC.
+    M2006,
+    /// GM6020 commanded in voltage (0x1FF / 0x2FF).
+    Gm6020Voltage,
+    /// GM6020 commanded in current (0x1FE / 0x2FE; needs the motor's current loop enabled in
+    /// DJI's RoboMaster Assistant).
+    Gm6020Current,
+}
+
+impl DjiModel {
+    /// Highest ESC id.
+    pub const fn max_id(self) -> u8 {
+        match self {
+            Self::M3508 | Self::M2006 => 8,
+            Self::Gm6020Voltage | Self::Gm6020Current => 7,
+        }
+    }
+
+    /// Gear ratio to the output shaft.
+    pub const fn gear(self) -> GearRatio {
+        match self {
+            Self::M3508 => GearRatio::M3508,
+            Self::M2006 => GearRatio::M2006,
+            Self::Gm6020Voltage | Self::Gm6020Current => GearRatio::DIRECT,
+        }
+    }
+
+    /// Feedback ID for ESC `id`.
+    pub const fn feedback_id(self, id: u8) -> u16 {
+        match self {
+            Self::M3508 | Self::M2006 => 0x200 + id as u16,
+            Self::Gm6020Voltage | Self::Gm6020Current => 0x204 + id as u16,
+        }
+    }
+
+    /// Command frame ID and slot for ESC `id` (1-based, in range).
+    const fn command_slot(self, id: u8) -> Option<CommandSlot> {
+        let (low, high) = match self {
+            Self::M3508 | Self::M2006 => (0x200, 0x1FF),
+            Self::Gm6020Voltage => (0x1FF, 0x2FF),
+            Self::Gm6020Current => (0x1FE, 0x2FE),
+        };
+        let zero_based = id.wrapping_sub(1);
+        CommandSlot::new(if zero_based < 4 { low } else { high }, zero_based % 4)
+    }
+
+    /// Command units (amps, or volts in voltage mode) per raw count: the raw full scale and
+    /// the physical value it stands for.
+    const fn raw_full_scale(self) -> (f32, f32) {
+        match self {
+            Self::M3508 => (16384.0, 20.0),
+            Self::M2006 => (10000.0, 10.0),
+            Self::Gm6020Current => (16384.0, 3.0),
+            Self::Gm6020Voltage => (30000.0, 24.0),
+        }
+    }
+
+    /// Whether the ESC reports temperature in D6.
+    pub const fn reports_temperature(self) -> bool {
+        !matches!(self, Self::M2006)
+    }
+
+    /// Whether the command is a voltage (else a current).
+    pub const fn is_voltage_mode(self) -> bool {
+        matches!(self, Self::Gm6020Voltage)
+    }
+
+    /// The ESC's own command limit in amps (volts in voltage mode at the default raw limit).
+    pub const fn max_command(self) -> f32 {
+        match self {
+            Self::M3508 => 20.0,
+            Self::M2006 => 10.0,
+            Self::Gm6020Current => 3.0,
+            Self::Gm6020Voltage => 20.0, // 25000 raw at 30000 ↔ 24 V
+        }
+    }
+}
+
+/// Configuration of a DJI motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DjiConfig {
+    /// Speed and angle loops.
+    pub cascade: CascadeConfig,
+    /// Offline timeout, multi-turn policy and thermal limits.
+    pub health: HealthConfig,
+    /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
+    /// firmware). Ignored by the other models.
+    pub voltage_raw_limit: i16,
+    /// Where the multi-turn angle starts (GM6020: absolute with its zero offset is typical).
+    pub origin: Origin,
+}
+
+/// Default gains, provisional until tuned against the physical plants in rc10-sim.
+impl DjiConfig {
+    /// Defaults for `model`: speed loop with the ESC's full command range, angle loop limited
+    /// to a speed the motor reaches, angle loop every 10th tick (RC10_LIB), thermal derating
+    /// from 100 °C to cut-off at 120 °C where a temperature is reported (C620 and GM6020 cut
+    /// at 125 °C themselves).
+    pub const fn default_for(model: DjiModel) -> Self {
+        let (speed, angle) = match model {
+            // Amps per rpm at the output; rpm per degree.
+            DjiModel::M3508 => (
+                PidConfig::new(0.3, 15.0, 0.0),
+                PidConfig::new(8.0, 0.0, 0.0).with_output_limit(400.0),
+            ),
+            DjiModel::M2006 => (
+                PidConfig::new(0.15, 8.0, 0.0),
+                PidConfig::new(8.0, 0.0, 0.0).with_output_limit(400.0),
+            ),
+            // Volts per rpm.
+            DjiModel::Gm6020Voltage => (
+                PidConfig::new(0.3, 10.0, 0.0),
+                PidConfig::new(10.0, 0.0, 0.0).with_output_limit(250.0),
+            ),
+            DjiModel::Gm6020Current => (
+                PidConfig::new(0.02, 1.0, 0.0),
+                PidConfig::new(10.0, 0.0, 0.0).with_output_limit(250.0),
+            ),
+        };
+        let thermal = if model.reports_temperature() {
+            Some(ThermalLimits {
+                derate_start_c: 100.0,
+                cutoff_c: 120.0,
+            })
+        } else {
+            None
+        };
+        Self {
+            cascade: CascadeConfig {
+                speed: speed.with_output_limit(model.max_command()),
+                angle,
+                angle_divider: 10,
+            },
+            health: HealthConfig::DEFAULT.with_thermal(thermal),
+            voltage_raw_limit: 25000,
+            origin: Origin::PowerOn,
+        }
+    }
+}
+
+/// Why a DJI motor could not be created.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DjiError {
+    /// The ESC id is outside `1..=max` for this model.
+    IdOutOfRange {
+        /// The id given.
+        id: u8,
+        /// The model's highest id.
+        max: u8,
+    },
+    /// A loop configuration cannot work.
+    Pid(PidConfigError),
+    /// The encoder origin's zero offset is not below 8192.
+    InvalidOrigin,
+}
+
+impl fmt::Display for DjiError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::IdOutOfRange { id, max } => write!(f, "DJI ESC id {id} not in 1..={max}"),
+            Self::Pid(e) => write!(f, "DJI motor loop: {e}"),
+            Self::InvalidOrigin => f.write_str("DJI encoder zero offset not below 8192"),
+        }
+    }
+}
+
+impl core::error::Error for DjiError {}
+
+#[derive(Debug)]
+struct DjiState {
+    cascade: Cascade,
+    encoder: Encoder,
+    speed_rpm: f32,
+    current_amps: f32,
+    temperature_c: Option<f32>,
+    last_feedback: Option<Instant>,
+    online: bool,
+    awaiting_return: bool,
+    offline_events: u32,
+    command: f32,
+}
+
+/// A DJI motor on a CAN bus: [`CanNode`] for the scheduler, [`Motor`] for the application.
+///
+/// Create it once, place it in a `static` (or a `StaticCell`), register it on its bus and set
+/// targets from any task:
+///
+/// ```
+/// use rc10_core::motor::Motor;
+/// use rc10_core::motor::dji::DjiMotor;
+///
+/// // Invalid ids are a compile-time error in a static.
+/// static WHEEL_1: DjiMotor = match DjiMotor::m3508(1) {
+///     Ok(m) => m,
+///     Err(_) => panic!("bad M3508 id"),
+/// };
+///
+/// WHEEL_1.set_target_rpm(300.0).unwrap();
+/// assert!(WHEEL_1.set_target_rpm(f32::NAN).is_err());
+/// assert!(!WHEEL_1.is_online()); // no feedback yet: the command stays zero
+/// ```
+pub struct DjiMotor {
+    model: DjiModel,
+    esc_id: u8,
+    slot: CommandSlot,
+    config: DjiConfig,
+    state: Mutex<CriticalSectionRawMutex, RefCell<DjiState>>,
+}
+
+impl DjiMotor {
+    /// A motor of `model` with ESC id `esc_id` and the given configuration.
+    pub const fn new(model: DjiModel, esc_id: u8, config: DjiConfig) -> Result<Self, DjiError> {
+        let max = model.max_id();
+        let slot = match model.command_slot(esc_id) {
+            Some(s) if esc_id >= 1 && esc_id <= max => s,
+            _ => return Err(DjiError::IdOutOfRange { id: esc_id, max }),
+        };
+        let cascade = match Cascade::new(config.cascade) {
+            Ok(c) => c,
+            Err(e) => return Err(DjiError::Pid(e)),
+        };
+        let encoder =
+            match Encoder::new(EncoderConfig::dji(model.gear()).with_origin(config.origin)) {
+                Some(e) => e,
+                None => return Err(DjiError::InvalidOrigin),
+            };
+        Ok(Self {
+            model,
+            esc_id,
+            slot,
+            config,
+            state: Mutex::new(RefCell::new(DjiState {
+                cascade,
+                encoder,
+                speed_rpm: 0.0,
+                current_amps: 0.0,
+                temperature_c: None,
+                last_feedback: None,
+                online: false,
+                awaiting_return: false,
+                offline_events: 0,
+                command: 0.0,
+            })),
+        })
+    }
+
+    /// An M3508 (C620) with default configuration.
+    pub const fn m3508(esc_id: u8) -> Result<Self, DjiError> {
+        Self::new(
+            DjiModel::M3508,
+            esc_id,
+            DjiConfig::default_for(DjiModel::M3508),
+        )
+    }
+
+    /// An M2006 (C610) with default configuration.
+    pub const fn m2006(esc_id: u8) -> Result<Self, DjiError> {
+        Self::new(
+            DjiModel::M2006,
+            esc_id,
+            DjiConfig::default_for(DjiModel::M2006),
+        )
+    }
+
+    /// A GM6020 in voltage mode with default configuration.
+    pub const fn gm6020_voltage(esc_id: u8) -> Result<Self, DjiError> {
+        let model = DjiModel::Gm6020Voltage;
+        Self::new(model, esc_id, DjiConfig::default_for(model))
+    }
+
+    /// A GM6020 in current mode with default configuration.
+    pub const fn gm6020_current(esc_id: u8) -> Result<Self, DjiError> {
+        let model = DjiModel::Gm6020Current;
+        Self::new(model, esc_id, DjiConfig::default_for(model))
+    }
+
+    /// The model.
+    pub const fn model(&self) -> DjiModel {
+        self.model
+    }
+
+    /// The ESC id (1–8, GM6020 1–7).
+    pub const fn esc_id(&self) -> u8 {
+        self.esc_id
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &DjiConfig {
+        &self.config
+    }
+
+    /// The command frame ID and slot this motor writes.
+    pub const fn command_slot(&self) -> CommandSlot {
+        self.slot
+    }
+
+    /// The speed loop's last per-term output (for tuning and telemetry).
+    pub fn speed_loop_terms(&self) -> crate::pid::PidTerms {
+        self.state.lock(|s| s.borrow().cascade.speed_terms())
+    }
+
+    /// Converts a command (amps, or volts in voltage mode) to the raw slot value, clamped to
+    /// the ESC's range before the integer conversion (no wrap, no sign flip).
+    pub fn command_to_raw(&self, command: f32) -> i16 {
+        let (raw_fs, unit_fs) = self.model.raw_full_scale();
+        let raw_limit = if self.model.is_voltage_mode() {
+            f32::from(self.config.voltage_raw_limit.max(0))
+        } else {
+            raw_fs
+        };
+        let raw = saturate(command * (raw_fs / unit_fs), raw_limit);
+        // |raw| ≤ 30000 < i16::MAX, and saturate maps NaN to 0.
+        libm::roundf(raw) as i16
+    }
+
+    fn set(&self, mode: ControlMode, target: f32) -> Result<(), TargetError> {
+        if !target.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.state
+            .lock(|s| s.borrow_mut().cascade.set_target(mode, target));
+        Ok(())
+    }
+
+    fn parse(&self, s: &mut DjiState, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
+        let d = frame.data8().ok_or(FrameError::WrongLength {
+            dlc: frame.dlc() as u8,
+        })?;
+        let raw_angle = u16::from_be_bytes([d[0], d[1]]);
+        let rotor_rpm = i16::from_be_bytes([d[2], d[3]]);
+        let raw_current = i16::from_be_bytes([d[4], d[5]]);
+        if raw_angle >= crate::encoder::DJI_COUNTS_PER_REV {
+            return Err(FrameError::OutOfRange);
+        }
+        if s.awaiting_return {
+            if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
+                s.encoder.reset();
+            }
+            s.awaiting_return = false;
+        }
+        s.encoder
+            .update(raw_angle)
+            .map_err(|_| FrameError::OutOfRange)?;
+        s.speed_rpm = f32::from(rotor_rpm) / self.model.gear().as_f32();
+        let (raw_fs, unit_fs) = self.model.raw_full_scale();
+        s.current_amps = if self.model.is_voltage_mode() {
+            // Voltage-mode GM6020 reports torque current on the current-mode scale.
+            f32::from(raw_current) * (3.0 / 16384.0)
+        } else {
+            f32::from(raw_current) * (unit_fs / raw_fs)
+        };
+        s.temperature_c = self.model.reports_temperature().then_some(f32::from(d[6]));
+        s.last_feedback = Some(now);
+        Ok(())
+    }
+}
+
+impl CanNode for DjiMotor {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage {
+            listen: Some(IdFilter::standard(self.model.feedback_id(self.esc_id))),
+            feedback_hz: 1000,
+            feedback_extended: false,
+            command_slot: Some(self.slot),
+            command_frames_per_tick: 0,
+            command_extended: false,
+        }
+    }
+
+    fn matches_frame(&self, frame: &CanFrame) -> bool {
+        !frame.is_extended() && frame.raw_id() == u32::from(self.model.feedback_id(self.esc_id))
+    }
+
+    fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
+        self.state
+            .lock(|s| self.parse(&mut s.borrow_mut(), frame, now))
+    }
+
+    fn update(&self, now: Instant, dt_s: f32) {
+        let health = self.config.health;
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            let online = health.is_online(s.last_feedback, now);
+            if s.online && !online {
+                s.offline_events = s.offline_events.wrapping_add(1);
+                s.awaiting_return = true;
+                s.cascade.reset();
+            }
+            s.online = online;
+            if !online {
+                s.command = 0.0;
+                return;
+            }
+            let derate = match (health.thermal, s.temperature_c) {
+                (Some(limits), Some(t)) => limits.derating(t),
+                _ => 1.0,
+            };
+            let measured = Measured {
+                speed_rpm: s.speed_rpm,
+                angle_deg: s.encoder.angle_deg(),
+                total_angle_deg: s.encoder.total_angle_deg(),
+            };
+            let out = s.cascade.step(&measured, dt_s);
+            s.command = saturate(out, self.model.max_command() * derate);
+        });
+    }
+
+    fn pack_command(&self, out: &mut TxBatch) {
+        let command = self.state.lock(|s| s.borrow().command);
+        out.write_slot(self.slot, self.command_to_raw(command));
+    }
+}
+
+impl Motor for DjiMotor {
+    fn set_target_current(&self, amps: f32) -> Result<(), TargetError> {
+        if self.model.is_voltage_mode() {
+            return Err(TargetError::Unsupported);
+        }
+        self.set(ControlMode::Current, amps)
+    }
+
+    fn set_target_voltage(&self, volts: f32) -> Result<(), TargetError> {
+        if !self.model.is_voltage_mode() {
+            return Err(TargetError::Unsupported);
+        }
+        self.set(ControlMode::Voltage, volts)
+    }
+
+    fn set_target_rpm(&self, rpm: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Speed, rpm)
+    }
+
+    fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Angle, angle_deg)
+    }
+
+    fn set_target_total_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::TotalAngle, angle_deg)
+    }
+
+    fn disable(&self) {
+        let _ = self.set(ControlMode::Disabled, 0.0);
+    }
+
+    fn state(&self) -> MotorState {
+        self.state.lock(|cell| {
+            let s = cell.borrow();
+            MotorState {
+                online: s.online,
+                mode: s.cascade.mode(),
+                target: s.cascade.target(),
+                speed_rpm: s.speed_rpm,
+                angle_deg: s.encoder.angle_deg(),
+                total_angle_deg: s.encoder.total_angle_deg(),
+                current_amps: s.current_amps,
+                temperature_c: s.temperature_c,
+                command: s.command,
+                offline_events: s.offline_events,
+                last_feedback: s.last_feedback,
+            }
+        })
+    }
+
+    fn gear_ratio(&self) -> GearRatio {
+        self.model.gear()
+    }
+}
+
+impl fmt::Debug for DjiMotor {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("DjiMotor")
+            .field("model", &self.model)
+            .field("esc_id", &self.esc_id)
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests;

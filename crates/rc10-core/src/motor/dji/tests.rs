@@ -1,0 +1,373 @@
+//! Byte-for-byte tests of the DJI driver. Expected bytes are worked out by hand from the
+//! protocol table in the module docs.
+
+use super::*;
+use crate::motor::MultiTurnOnReturn;
+use crate::time::Duration;
+
+const T0: Instant = Instant::from_millis(1000);
+const DT: f32 = 0.001;
+
+fn fb(id: u16, angle: u16, rotor_rpm: i16, current: i16, temp: u8) -> CanFrame {
+    let a = angle.to_be_bytes();
+    let r = rotor_rpm.to_be_bytes();
+    let c = current.to_be_bytes();
+    CanFrame::standard(id, &[a[0], a[1], r[0], r[1], c[0], c[1], temp, 0]).unwrap()
+}
+
+/// Brings the motor online at `T0` with a neutral feedback frame.
+fn online(m: &DjiMotor) {
+    let id = m.model().feedback_id(m.esc_id());
+    m.update_feedback(&fb(id, 0, 0, 0, 30), T0).unwrap();
+}
+
+/// Update then pack one tick at `now`; returns the batch.
+fn tick(m: &DjiMotor, now: Instant) -> TxBatch {
+    let mut b = TxBatch::new();
+    m.update(now, DT);
+    m.pack_command(&mut b);
+    b
+}
+
+fn only_frame(b: &TxBatch) -> (u32, [u8; 8]) {
+    assert_eq!(b.frames().len(), 1);
+    let f = b.frames()[0];
+    (f.raw_id(), *f.data8().unwrap())
+}
+
+#[test]
+fn m3508_current_10a_id1_packs_0x2000_in_slot_0_of_0x200() {
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_current(10.0).unwrap();
+    // 10 A · 16384 / 20 A = 8192 = 0x2000.
+    assert_eq!(
+        only_frame(&tick(&m, T0)),
+        (0x200, [0x20, 0x00, 0, 0, 0, 0, 0, 0])
+    );
+}
+
+#[test]
+fn m3508_negative_current_id6_packs_slot_1_of_0x1ff() {
+    let m = DjiMotor::m3508(6).unwrap();
+    online(&m);
+    m.set_target_current(-5.0).unwrap();
+    // -5 A → -4096 = 0xF000, ids 5–8 on 0x1FF, id 6 → slot 1 (bytes 2–3).
+    assert_eq!(
+        only_frame(&tick(&m, T0)),
+        (0x1FF, [0, 0, 0xF0, 0x00, 0, 0, 0, 0])
+    );
+}
+
+#[test]
+fn m3508_current_beyond_range_clamps_without_wrap() {
+    let m = DjiMotor::m3508(4).unwrap();
+    online(&m);
+    m.set_target_current(25.0).unwrap();
+    // Clamped to 20 A = 16384 = 0x4000 (a wrapping conversion of 20480 would be fine, but
+    // of 1000 A it would flip sign).
+    assert_eq!(only_frame(&tick(&m, T0)).1, [0, 0, 0, 0, 0, 0, 0x40, 0x00]);
+    m.set_target_current(-1000.0).unwrap();
+    assert_eq!(only_frame(&tick(&m, T0)).1, [0, 0, 0, 0, 0, 0, 0xC0, 0x00]);
+}
+
+#[test]
+fn command_to_raw_saturates_for_every_model() {
+    let m = DjiMotor::m3508(1).unwrap();
+    assert_eq!(m.command_to_raw(1e9), 16384);
+    assert_eq!(m.command_to_raw(f32::NAN), 0);
+    let c610 = DjiMotor::m2006(1).unwrap();
+    assert_eq!(c610.command_to_raw(11.0), 10000);
+    assert_eq!(c610.command_to_raw(-0.0015), -2); // -1.5 mA rounds away from zero
+    let gm_v = DjiMotor::gm6020_voltage(1).unwrap();
+    assert_eq!(gm_v.command_to_raw(24.0), 25000);
+    let gm_i = DjiMotor::gm6020_current(1).unwrap();
+    assert_eq!(gm_i.command_to_raw(-3.5), -16384);
+}
+
+#[test]
+fn m2006_2_5a_id3_packs_2500_in_slot_2() {
+    let m = DjiMotor::m2006(3).unwrap();
+    online(&m);
+    m.set_target_current(2.5).unwrap();
+    // 2.5 A · 10000 / 10 A = 2500 = 0x09C4.
+    assert_eq!(
+        only_frame(&tick(&m, T0)),
+        (0x200, [0, 0, 0, 0, 0x09, 0xC4, 0, 0])
+    );
+}
+
+#[test]
+fn gm6020_voltage_slots_and_default_limit() {
+    let m = DjiMotor::gm6020_voltage(2).unwrap();
+    online(&m);
+    m.set_target_voltage(12.0).unwrap();
+    // 12 V · 30000 / 24 V = 15000 = 0x3A98, ids 1–4 on 0x1FF, id 2 → slot 1.
+    assert_eq!(
+        only_frame(&tick(&m, T0)),
+        (0x1FF, [0, 0, 0x3A, 0x98, 0, 0, 0, 0])
+    );
+    m.set_target_voltage(-24.0).unwrap();
+    // -30000 clamped to the default -25000 = 0x9E58.
+    assert_eq!(only_frame(&tick(&m, T0)).1, [0, 0, 0x9E, 0x58, 0, 0, 0, 0]);
+}
+
+#[test]
+fn gm6020_voltage_limit_is_configurable_to_30000() {
+    let model = DjiModel::Gm6020Voltage;
+    let mut cfg = DjiConfig::default_for(model);
+    cfg.voltage_raw_limit = 30000;
+    let m = DjiMotor::new(model, 7, cfg).unwrap();
+    // id 7 → 0x2FF slot 2; feedback 0x20B.
+    assert_eq!(m.command_slot(), CommandSlot::new(0x2FF, 2).unwrap());
+    assert_eq!(m.model().feedback_id(7), 0x20B);
+    assert_eq!(m.command_to_raw(24.0), 30000);
+}
+
+#[test]
+fn gm6020_current_mode_uses_0x1fe_0x2fe() {
+    let m = DjiMotor::gm6020_current(6).unwrap();
+    online(&m);
+    m.set_target_current(1.5).unwrap();
+    // 1.5 A · 16384 / 3 A = 8192 = 0x2000; id 6 → 0x2FE slot 1.
+    assert_eq!(
+        only_frame(&tick(&m, T0)),
+        (0x2FE, [0, 0, 0x20, 0x00, 0, 0, 0, 0])
+    );
+    assert_eq!(
+        DjiMotor::gm6020_current(1).unwrap().command_slot().id(),
+        0x1FE
+    );
+}
+
+#[test]
+fn every_id_maps_to_its_slot() {
+    for id in 1..=8u8 {
+        let m = DjiMotor::m3508(id).unwrap();
+        let expect_id = if id <= 4 { 0x200 } else { 0x1FF };
+        assert_eq!(
+            m.command_slot(),
+            CommandSlot::new(expect_id, (id - 1) % 4).unwrap()
+        );
+        assert!(m.matches_frame(&fb(0x200 + u16::from(id), 0, 0, 0, 0)));
+    }
+    for id in 1..=7u8 {
+        let m = DjiMotor::gm6020_voltage(id).unwrap();
+        let expect_id = if id <= 4 { 0x1FF } else { 0x2FF };
+        assert_eq!(
+            m.command_slot(),
+            CommandSlot::new(expect_id, (id - 1) % 4).unwrap()
+        );
+        assert!(m.matches_frame(&fb(0x204 + u16::from(id), 0, 0, 0, 0)));
+    }
+}
+
+#[test]
+fn out_of_range_ids_are_rejected() {
+    assert_eq!(
+        DjiMotor::m3508(0).unwrap_err(),
+        DjiError::IdOutOfRange { id: 0, max: 8 }
+    );
+    assert_eq!(
+        DjiMotor::m3508(9).unwrap_err(),
+        DjiError::IdOutOfRange { id: 9, max: 8 }
+    );
+    assert_eq!(
+        DjiMotor::gm6020_voltage(8).unwrap_err(),
+        DjiError::IdOutOfRange { id: 8, max: 7 }
+    );
+}
+
+#[test]
+fn m3508_feedback_parsed_to_output_shaft_units() {
+    let m = DjiMotor::m3508(2).unwrap();
+    // angle 8191, rotor 1000 rpm, current 2048 (2.5 A), 45 °C.
+    m.update_feedback(&fb(0x202, 8191, 1000, 2048, 45), T0)
+        .unwrap();
+    let s = m.state();
+    assert!((s.speed_rpm - 1000.0 * 187.0 / 3591.0).abs() < 1e-3); // 52.075 rpm
+    assert!((s.current_amps - 2.5).abs() < 1e-6);
+    assert_eq!(s.temperature_c, Some(45.0));
+    assert_eq!(s.last_feedback, Some(T0));
+    m.update_feedback(&fb(0x202, 100, -1000, -2048, 45), T0)
+        .unwrap();
+    let s = m.state();
+    assert!((s.speed_rpm + 52.075).abs() < 1e-3);
+    assert!((s.current_amps + 2.5).abs() < 1e-6);
+    // 8191 → 100 is +101 rotor counts across the wrap.
+    let expect_deg = 101.0 * 360.0 / 8192.0 / (3591.0 / 187.0);
+    assert!(
+        (s.total_angle_deg - expect_deg).abs() < 1e-4,
+        "{}",
+        s.total_angle_deg
+    );
+}
+
+#[test]
+fn m2006_feedback_has_no_temperature() {
+    let m = DjiMotor::m2006(1).unwrap();
+    m.update_feedback(&fb(0x201, 0, 3600, 1000, 99), T0)
+        .unwrap();
+    let s = m.state();
+    assert_eq!(s.temperature_c, None);
+    assert!((s.speed_rpm - 100.0).abs() < 1e-4); // 3600 / 36
+    assert!((s.current_amps - 1.0).abs() < 1e-6); // 1000 mA
+}
+
+#[test]
+fn malformed_feedback_is_rejected_and_changes_nothing() {
+    let m = DjiMotor::m3508(1).unwrap();
+    let short = CanFrame::standard(0x201, &[0; 7]).unwrap();
+    assert_eq!(
+        m.update_feedback(&short, T0),
+        Err(FrameError::WrongLength { dlc: 7 })
+    );
+    assert_eq!(
+        m.update_feedback(&fb(0x201, 8192, 0, 0, 0), T0),
+        Err(FrameError::OutOfRange)
+    );
+    let remote = CanFrame::remote(crate::can::StandardId::new(0x201).unwrap(), 8).unwrap();
+    assert!(m.update_feedback(&remote, T0).is_err());
+    assert_eq!(m.state().last_feedback, None);
+}
+
+#[test]
+fn no_feedback_ever_sends_zero() {
+    let m = DjiMotor::m3508(1).unwrap();
+    m.set_target_current(10.0).unwrap();
+    assert_eq!(only_frame(&tick(&m, T0)).1, [0; 8]);
+    assert!(!m.is_online());
+}
+
+#[test]
+fn offline_after_timeout_zeroes_command_and_recovers() {
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_current(10.0).unwrap();
+    assert_eq!(
+        only_frame(&tick(&m, T0 + Duration::from_millis(100))).1[..2],
+        [0x20, 0]
+    );
+    assert!(m.is_online());
+    // 101 ms of silence: offline, zero command.
+    assert_eq!(
+        only_frame(&tick(&m, T0 + Duration::from_millis(101))).1,
+        [0; 8]
+    );
+    let s = m.state();
+    assert!(!s.online);
+    assert_eq!(s.offline_events, 1);
+    assert_eq!(s.command, 0.0);
+    // Power returns: the next frame brings it back, the target is kept.
+    let back = T0 + Duration::from_millis(500);
+    m.update_feedback(&fb(0x201, 10, 0, 0, 30), back).unwrap();
+    assert_eq!(only_frame(&tick(&m, back)).1[..2], [0x20, 0]);
+    assert!(m.is_online());
+    assert_eq!(m.state().offline_events, 1);
+}
+
+#[test]
+fn offline_resets_speed_loop_so_return_has_no_windup_kick() {
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    // A small error, so the loop integrates instead of sitting at the current limit.
+    m.set_target_rpm(20.0).unwrap();
+    for k in 0..50 {
+        tick(&m, T0 + Duration::from_millis(k));
+    }
+    let wound = m.speed_loop_terms().i;
+    assert!(wound > 0.0);
+    tick(&m, T0 + Duration::from_millis(200)); // offline
+    let back = T0 + Duration::from_millis(300);
+    m.update_feedback(&fb(0x201, 0, 0, 0, 30), back).unwrap();
+    tick(&m, back);
+    // First tick back: integral restarted from zero (one step's worth only).
+    assert!(m.speed_loop_terms().i < wound / 10.0);
+}
+
+#[test]
+fn multi_turn_restart_policy_restarts_total_angle() {
+    let mut cfg = DjiConfig::default_for(DjiModel::M2006);
+    cfg.health = cfg.health.with_on_return(MultiTurnOnReturn::Restart);
+    let m = DjiMotor::new(DjiModel::M2006, 1, cfg).unwrap();
+    m.update_feedback(&fb(0x201, 0, 0, 0, 0), T0).unwrap();
+    m.update_feedback(&fb(0x201, 4000, 0, 0, 0), T0).unwrap();
+    tick(&m, T0);
+    assert!(m.total_angle_deg() > 0.0);
+    tick(&m, T0 + Duration::from_millis(150)); // offline
+    let back = T0 + Duration::from_millis(300);
+    m.update_feedback(&fb(0x201, 7000, 0, 0, 0), back).unwrap();
+    assert_eq!(m.total_angle_deg(), 0.0);
+}
+
+#[test]
+fn multi_turn_continue_policy_keeps_counting() {
+    let m = DjiMotor::m2006(1).unwrap();
+    m.update_feedback(&fb(0x201, 0, 0, 0, 0), T0).unwrap();
+    m.update_feedback(&fb(0x201, 4000, 0, 0, 0), T0).unwrap();
+    tick(&m, T0);
+    tick(&m, T0 + Duration::from_millis(150)); // offline
+    let back = T0 + Duration::from_millis(300);
+    m.update_feedback(&fb(0x201, 4100, 0, 0, 0), back).unwrap();
+    let expect = 4100.0 * 360.0 / 8192.0 / 36.0;
+    assert!((m.total_angle_deg() - expect).abs() < 1e-3);
+}
+
+#[test]
+fn thermal_derating_halves_limit_at_110c_and_cuts_at_120c() {
+    let m = DjiMotor::m3508(1).unwrap();
+    m.update_feedback(&fb(0x201, 0, 0, 0, 110), T0).unwrap();
+    m.set_target_current(20.0).unwrap();
+    // Limit 20 A · (120 - 110) / (120 - 100) = 10 A = 8192 = 0x2000.
+    assert_eq!(only_frame(&tick(&m, T0)).1[..2], [0x20, 0x00]);
+    m.update_feedback(&fb(0x201, 0, 0, 0, 121), T0).unwrap();
+    assert_eq!(only_frame(&tick(&m, T0)).1[..2], [0, 0]);
+}
+
+#[test]
+fn nan_target_is_refused_and_previous_kept() {
+    let m = DjiMotor::m3508(1).unwrap();
+    m.set_target_rpm(100.0).unwrap();
+    assert_eq!(m.set_target_rpm(f32::NAN), Err(TargetError::NotFinite));
+    assert_eq!(
+        m.set_target_angle_deg(f32::INFINITY),
+        Err(TargetError::NotFinite)
+    );
+    assert_eq!(m.state().target, 100.0);
+    assert_eq!(m.mode(), ControlMode::Speed);
+}
+
+#[test]
+fn voltage_mode_refuses_current_target_and_vice_versa() {
+    let v = DjiMotor::gm6020_voltage(1).unwrap();
+    assert_eq!(v.set_target_current(1.0), Err(TargetError::Unsupported));
+    let c = DjiMotor::m3508(1).unwrap();
+    assert_eq!(c.set_target_voltage(1.0), Err(TargetError::Unsupported));
+}
+
+#[test]
+fn speed_mode_drives_towards_target() {
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_rpm(100.0).unwrap();
+    // At rest below target: positive current; above target: negative.
+    assert!(m.command_to_raw(m.state().command) == 0);
+    tick(&m, T0);
+    assert!(m.state().command > 0.0);
+    m.update_feedback(&fb(0x201, 0, 3000, 0, 30), T0).unwrap(); // 156 rpm at the output
+    for _ in 0..5 {
+        tick(&m, T0);
+    }
+    assert!(m.state().command < 0.0);
+}
+
+#[test]
+fn disable_sends_zero() {
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_current(5.0).unwrap();
+    tick(&m, T0);
+    m.disable();
+    assert_eq!(only_frame(&tick(&m, T0)).1, [0; 8]);
+    assert_eq!(m.mode(), ControlMode::Disabled);
+}

@@ -1,0 +1,302 @@
+//! Motors: the user-facing [`Motor`] trait, control modes, health (online/offline, thermal
+//! derating) and the drivers (DJI, VESC, Damiao).
+//!
+//! # Sharing model
+//!
+//! A motor object is used at the same time by three kinds of task, possibly at different
+//! priorities (an `InterruptExecutor` for the control loop is common):
+//! - the scheduler task calls [`CanNode::update`](crate::node::CanNode::update) and
+//!   [`CanNode::pack_command`](crate::node::CanNode::pack_command) every tick;
+//! - the receiver task calls [`CanNode::update_feedback`](crate::node::CanNode::update_feedback)
+//!   for each of its frames;
+//! - application tasks call the [`Motor`] setters and getters.
+//!
+//! Every method takes `&self`. A driver keeps all its mutable state in one
+//! `embassy_sync::blocking_mutex::Mutex<CriticalSectionRawMutex, RefCell<_>>`, locked for the
+//! few dozen instructions of one call and never across an `.await` (there are no `.await`s in
+//! these methods). On a single-core Cortex-M a critical section is `cpsid i` / `cpsie i`, so a
+//! tick's lock traffic costs a handful of cycles per motor; in exchange there is no `unsafe`,
+//! no `static mut` and no torn read (a reader sees rpm, angle and current from the same
+//! feedback frame). Motors therefore live in plain `static`s or `StaticCell`s and are shared
+//! as `&'static`.
+//!
+//! # Health
+//!
+//! A motor whose feedback has been silent for longer than
+//! [`HealthConfig::offline_timeout`] (default 100 ms: a hundred DJI feedback periods, so
+//! bursts of lost frames on a busy bus do not trip it, and short enough that a motor whose
+//! power was cut by the referee system stops being driven at once) is **offline**: its command
+//! is zero, its controllers are reset (no integral wound up while it was away), and
+//! [`Motor::is_online`] says so. It comes back by itself with its next feedback frame; what
+//! happens to the multi-turn angle then is set by [`MultiTurnOnReturn`].
+
+pub mod cascade;
+pub mod dji;
+
+use crate::encoder::GearRatio;
+use crate::time::{Duration, Instant};
+use core::fmt;
+
+/// What a motor is asked to follow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlMode {
+    /// Zero command (the initial mode, and after [`Motor::disable`]).
+    #[default]
+    Disabled,
+    /// Open-loop current (torque) command in amps.
+    Current,
+    /// Open-loop voltage command in volts (GM6020 voltage mode).
+    Voltage,
+    /// Output-shaft speed in rpm.
+    Speed,
+    /// Output-shaft angle within one turn in degrees, reached the shortest way round.
+    Angle,
+    /// Output-shaft multi-turn angle in degrees.
+    TotalAngle,
+}
+
+/// Why a target was refused (the previous target stays in force).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TargetError {
+    /// The target is NaN or infinite.
+    NotFinite,
+    /// This motor (or its current configuration) has no such mode, e.g. a current target for
+    /// a GM6020 configured for voltage mode.
+    Unsupported,
+}
+
+impl fmt::Display for TargetError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::NotFinite => "motor target is NaN or infinite",
+            Self::Unsupported => "motor does not support this control mode",
+        })
+    }
+}
+
+impl core::error::Error for TargetError {}
+
+/// Everything an application may want to read about a motor, from one consistent moment.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MotorState {
+    /// Whether feedback arrived within the offline timeout.
+    pub online: bool,
+    /// Current control mode.
+    pub mode: ControlMode,
+    /// The active target in the mode's unit (amps, volts, rpm or degrees).
+    pub target: f32,
+    /// Output-shaft speed in rpm.
+    pub speed_rpm: f32,
+    /// Output-shaft angle within one turn, [0, 360) degrees.
+    pub angle_deg: f32,
+    /// Output-shaft multi-turn angle in degrees.
+    pub total_angle_deg: f32,
+    /// Measured torque current in amps, as the ESC reports it.
+    pub current_amps: f32,
+    /// Temperature in °C, where the device reports one.
+    pub temperature_c: Option<f32>,
+    /// The command sent last tick, in amps (or volts in voltage mode); zero while offline.
+    pub command: f32,
+    /// Times the motor went offline since start.
+    pub offline_events: u32,
+    /// Time of the last accepted feedback frame.
+    pub last_feedback: Option<Instant>,
+}
+
+/// The user-facing side of a motor (RC10_LIB `Motor_Base`'s public API).
+///
+/// Setters only record a target (and switch mode); the scheduler does the work on its next
+/// tick. Speeds and angles are of the output shaft.
+pub trait Motor: Sync {
+    /// Commands a torque current in amps (clamped to the ESC's range when packed).
+    fn set_target_current(&self, amps: f32) -> Result<(), TargetError>;
+
+    /// Commands a voltage in volts. Only voltage-mode devices support it.
+    fn set_target_voltage(&self, volts: f32) -> Result<(), TargetError> {
+        let _ = volts;
+        Err(TargetError::Unsupported)
+    }
+
+    /// Holds an output-shaft speed in rpm.
+    fn set_target_rpm(&self, rpm: f32) -> Result<(), TargetError>;
+
+    /// Holds an output-shaft angle in degrees (any value; taken modulo 360 and reached the
+    /// shortest way round).
+    fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError>;
+
+    /// Holds a multi-turn output-shaft angle in degrees.
+    fn set_target_total_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError>;
+
+    /// Stops driving the motor (zero command) until a new target is set.
+    fn disable(&self);
+
+    /// A consistent snapshot of the motor's state.
+    fn state(&self) -> MotorState;
+
+    /// Rotor turns per output turn.
+    fn gear_ratio(&self) -> GearRatio;
+
+    /// Output-shaft speed in rpm.
+    fn speed_rpm(&self) -> f32 {
+        self.state().speed_rpm
+    }
+
+    /// Output-shaft angle in [0, 360) degrees.
+    fn angle_deg(&self) -> f32 {
+        self.state().angle_deg
+    }
+
+    /// Output-shaft multi-turn angle in degrees.
+    fn total_angle_deg(&self) -> f32 {
+        self.state().total_angle_deg
+    }
+
+    /// Measured torque current in amps.
+    fn current_amps(&self) -> f32 {
+        self.state().current_amps
+    }
+
+    /// Temperature in °C, if the device reports one.
+    fn temperature_c(&self) -> Option<f32> {
+        self.state().temperature_c
+    }
+
+    /// The control mode.
+    fn mode(&self) -> ControlMode {
+        self.state().mode
+    }
+
+    /// Whether feedback is arriving.
+    fn is_online(&self) -> bool {
+        self.state().online
+    }
+}
+
+/// What the multi-turn angle does when an offline motor's feedback returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MultiTurnOnReturn {
+    /// Continue counting from the last reading before the outage, assuming the rotor moved
+    /// less than half a turn meanwhile (M3508: ±9.4° at the output). Right for a wheel or an
+    /// arm that was held still while the ESC was unpowered; the default.
+    #[default]
+    Continue,
+    /// Start again from the encoder origin, as after power-on (for a geared motor the total
+    /// angle restarts at 0; for an absolute encoder it restarts at the true angle).
+    Restart,
+}
+
+/// Temperature limits for devices that report a temperature.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ThermalLimits {
+    /// At and above this temperature the command limit falls linearly…
+    pub derate_start_c: f32,
+    /// …to zero at this temperature and above.
+    pub cutoff_c: f32,
+}
+
+impl ThermalLimits {
+    /// The factor (0–1) applied to the command limit at `temperature_c`.
+    pub fn derating(&self, temperature_c: f32) -> f32 {
+        if !temperature_c.is_finite() {
+            return 1.0;
+        }
+        if temperature_c >= self.cutoff_c {
+            0.0
+        } else if temperature_c <= self.derate_start_c {
+            1.0
+        } else {
+            (self.cutoff_c - temperature_c) / (self.cutoff_c - self.derate_start_c)
+        }
+    }
+}
+
+/// Online/offline and thermal policy of a motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HealthConfig {
+    /// Silence after which the motor is offline (default 100 ms).
+    pub offline_timeout: Duration,
+    /// Multi-turn angle policy when feedback returns.
+    pub on_return: MultiTurnOnReturn,
+    /// Thermal derating and cut-off, where the device reports a temperature.
+    pub thermal: Option<ThermalLimits>,
+}
+
+impl HealthConfig {
+    /// 100 ms offline timeout, continue multi-turn counting, no thermal limits.
+    pub const DEFAULT: Self = Self {
+        offline_timeout: Duration::from_millis(100),
+        on_return: MultiTurnOnReturn::Continue,
+        thermal: None,
+    };
+
+    /// Sets [`offline_timeout`](Self::offline_timeout).
+    #[must_use]
+    pub const fn with_offline_timeout(mut self, timeout: Duration) -> Self {
+        self.offline_timeout = timeout;
+        self
+    }
+
+    /// Sets [`thermal`](Self::thermal).
+    #[must_use]
+    pub const fn with_thermal(mut self, limits: Option<ThermalLimits>) -> Self {
+        self.thermal = limits;
+        self
+    }
+
+    /// Sets [`on_return`](Self::on_return).
+    #[must_use]
+    pub const fn with_on_return(mut self, policy: MultiTurnOnReturn) -> Self {
+        self.on_return = policy;
+        self
+    }
+
+    /// Whether feedback last seen at `last` still counts as online at `now`.
+    pub fn is_online(&self, last: Option<Instant>, now: Instant) -> bool {
+        match last {
+            // A timestamp from the "future" (receiver stamped after the tick read the clock)
+            // is fresh.
+            Some(t) => now <= t || now - t <= self.offline_timeout,
+            None => false,
+        }
+    }
+}
+
+impl Default for HealthConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn derating_is_linear_between_limits() {
+        let t = ThermalLimits {
+            derate_start_c: 100.0,
+            cutoff_c: 120.0,
+        };
+        assert_eq!(t.derating(25.0), 1.0);
+        assert_eq!(t.derating(110.0), 0.5);
+        assert_eq!(t.derating(120.0), 0.0);
+        assert_eq!(t.derating(150.0), 0.0);
+        assert_eq!(t.derating(f32::NAN), 1.0);
+    }
+
+    #[test]
+    fn online_window_is_inclusive_of_timeout() {
+        let h = HealthConfig::DEFAULT;
+        let t0 = Instant::from_millis(1000);
+        assert!(!h.is_online(None, t0));
+        assert!(h.is_online(Some(t0), Instant::from_millis(1100)));
+        assert!(!h.is_online(Some(t0), Instant::from_millis(1101)));
+        assert!(h.is_online(Some(Instant::from_millis(1200)), t0));
+    }
+}
