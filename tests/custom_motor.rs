@@ -161,7 +161,7 @@ impl Motor for MyMotor {
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.speed_rpm,
-                current_amps: s.current_amps,
+                current_amps: Some(s.current_amps),
                 command: s.command_amps,
                 last_feedback: s.last_feedback,
                 ..MotorState::default()
@@ -193,7 +193,7 @@ fn user_motor_shares_the_bus_with_a_dji_motor() {
     let dji_fb = CanFrame::standard(0x201, &[0, 0, 0, 0, 0, 0, 30, 0]).unwrap();
     assert_eq!(bus.dispatch(&dji_fb, t0), Dispatch::Handled(0));
     assert!((MY.speed_rpm() - 10.0).abs() < 1e-5);
-    assert!((MY.current_amps() - 1.5).abs() < 1e-6);
+    assert!((MY.current_amps().unwrap() - 1.5).abs() < 1e-6);
 
     // Commands through the trait objects the application would hold.
     let motors: [&dyn Motor; 2] = [&DJI, &MY];

@@ -32,6 +32,8 @@
 
 pub mod cascade;
 pub mod dji;
+pub mod dm;
+pub mod vesc;
 
 use crate::encoder::GearRatio;
 use crate::time::{Duration, Instant};
@@ -46,7 +48,8 @@ pub enum ControlMode {
     Disabled,
     /// Open-loop current (torque) command in amps.
     Current,
-    /// Open-loop voltage command in volts (GM6020 voltage mode).
+    /// Open-loop voltage command: volts for a GM6020 in voltage mode, duty cycle (−1…1) for a
+    /// VESC.
     Voltage,
     /// Output-shaft speed in rpm.
     Speed,
@@ -94,11 +97,15 @@ pub struct MotorState {
     pub angle_deg: f32,
     /// Output-shaft multi-turn angle in degrees.
     pub total_angle_deg: f32,
-    /// Measured torque current in amps, as the ESC reports it.
-    pub current_amps: f32,
+    /// Measured torque current in amps, where the device reports a current (a Damiao motor
+    /// reports torque instead: see its driver).
+    pub current_amps: Option<f32>,
     /// Temperature in °C, where the device reports one.
     pub temperature_c: Option<f32>,
-    /// The command sent last tick, in amps (or volts in voltage mode); zero while offline.
+    /// The command sent last tick, in the device's command unit: amps (DJI current mode,
+    /// VESC current or brake), volts (GM6020 voltage mode) or N·m of feed-forward torque
+    /// (Damiao); zero while offline. Devices that run their own loop on a speed or position
+    /// command (VESC eRPM, duty, position) report zero.
     pub command: f32,
     /// Times the motor went offline since start.
     pub offline_events: u32,
@@ -154,8 +161,8 @@ pub trait Motor: Sync {
         self.state().total_angle_deg
     }
 
-    /// Measured torque current in amps.
-    fn current_amps(&self) -> f32 {
+    /// Measured torque current in amps, where the device reports one.
+    fn current_amps(&self) -> Option<f32> {
         self.state().current_amps
     }
 

@@ -499,7 +499,7 @@ impl Motor for DjiMotor {
                 speed_rpm: s.speed_rpm,
                 angle_deg: s.encoder.angle_deg(),
                 total_angle_deg: s.encoder.total_angle_deg(),
-                current_amps: s.current_amps,
+                current_amps: Some(s.current_amps),
                 temperature_c: s.temperature_c,
                 command: s.command,
                 offline_events: s.offline_events,

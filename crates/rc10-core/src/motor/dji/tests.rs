@@ -186,14 +186,14 @@ fn m3508_feedback_parsed_to_output_shaft_units() {
         .unwrap();
     let s = m.state();
     assert!((s.speed_rpm - 1000.0 * 187.0 / 3591.0).abs() < 1e-3); // 52.075 rpm
-    assert!((s.current_amps - 2.5).abs() < 1e-6);
+    assert!((s.current_amps.unwrap() - 2.5).abs() < 1e-6);
     assert_eq!(s.temperature_c, Some(45.0));
     assert_eq!(s.last_feedback, Some(T0));
     m.update_feedback(&fb(0x202, 100, -1000, -2048, 45), T0)
         .unwrap();
     let s = m.state();
     assert!((s.speed_rpm + 52.075).abs() < 1e-3);
-    assert!((s.current_amps + 2.5).abs() < 1e-6);
+    assert!((s.current_amps.unwrap() + 2.5).abs() < 1e-6);
     // 8191 → 100 is +101 rotor counts across the wrap.
     let expect_deg = 101.0 * 360.0 / 8192.0 / (3591.0 / 187.0);
     assert!(
@@ -211,7 +211,7 @@ fn m2006_feedback_has_no_temperature() {
     let s = m.state();
     assert_eq!(s.temperature_c, None);
     assert!((s.speed_rpm - 100.0).abs() < 1e-4); // 3600 / 36
-    assert!((s.current_amps - 1.0).abs() < 1e-6); // 1000 mA
+    assert!((s.current_amps.unwrap() - 1.0).abs() < 1e-6); // 1000 mA
 }
 
 #[test]

@@ -1,0 +1,814 @@
+//! Damiao (DM) joint motors in MIT mode (DM-J4310-2EC class).
+//!
+//! Command, standard ID = the motor's CAN ID, DLC 8, big-endian bit fields:
+//! position 16 bits, velocity 12, kp 12, kd 12, torque 12, each mapped linearly from its range
+//! (`p ∈ ±p_max` rad, `v ∈ ±v_max` rad/s, `kp ∈ [0, 500]`, `kd ∈ [0, 5]`, `t ∈ ±t_max` N·m;
+//! defaults 12.5 rad, 30 rad/s, 10 N·m as set in Damiao's tool):
+//!
+//! ```text
+//! D0 = p[15:8]  D1 = p[7:0]  D2 = v[11:4]  D3 = v[3:0] kp[11:8]  D4 = kp[7:0]
+//! D5 = kd[11:4] D6 = kd[3:0] t[11:8]  D7 = t[7:0]
+//! ```
+//!
+//! The output torque is `kp·(p − p_meas) + kd·(v − v_meas) + t`. Every field is clamped to its
+//! range before conversion: the reference C code does not clamp, so an out-of-range value
+//! spills into the neighbouring field. Special commands are `FF FF FF FF FF FF FF xx` with
+//! `xx` = FC enable, FD disable, FE save position zero, FB clear error.
+//!
+//! Feedback on the master ID, DLC 8: D0 = motor id (low nibble) | state << 4, position 16 bits
+//! (D1–D2), velocity 12 (D3, D4 high nibble), torque 12 (D4 low nibble, D5), D6 MOSFET °C,
+//! D7 rotor °C. States: 0 disabled, 1 enabled, 8 over-voltage, 9 under-voltage,
+//! A over-current, B MOSFET over-temperature, C coil over-temperature, D communication lost,
+//! E overload.
+//!
+//! Positions are of the output shaft (the motor's driver accounts for its gearbox). The
+//! reported position wraps at ±`p_max`; this driver unwraps it into a multi-turn angle.
+
+use super::{ControlMode, HealthConfig, Motor, MotorState, TargetError};
+use crate::can::{CanFrame, IdFilter};
+use crate::encoder::GearRatio;
+use crate::math::{constrain, deg_to_rad, rad_to_deg, wrap_deg_360, wrap_signed};
+use crate::node::{BusUsage, CanNode, FrameError, TxBatch};
+use crate::time::Instant;
+use core::cell::RefCell;
+use core::f32::consts::TAU;
+use core::fmt;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+/// Largest MIT position gain (fixed by the protocol).
+pub const KP_MAX: f32 = 500.0;
+/// Largest MIT velocity gain (fixed by the protocol).
+pub const KD_MAX: f32 = 5.0;
+
+/// The ranges configured in the motor (Damiao's tool: PMAX, VMAX, TMAX).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MitLimits {
+    /// Position range ±this, in rad.
+    pub p_max_rad: f32,
+    /// Velocity range ±this, in rad/s.
+    pub v_max_rad_s: f32,
+    /// Torque range ±this, in N·m.
+    pub t_max_nm: f32,
+}
+
+impl MitLimits {
+    /// The factory defaults: 12.5 rad, 30 rad/s, 10 N·m.
+    pub const DEFAULT: Self = Self {
+        p_max_rad: 12.5,
+        v_max_rad_s: 30.0,
+        t_max_nm: 10.0,
+    };
+}
+
+/// One MIT-mode command (output shaft).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MitCommand {
+    /// Position target in rad.
+    pub position_rad: f32,
+    /// Velocity target in rad/s.
+    pub velocity_rad_s: f32,
+    /// Position gain, N·m/rad (0–500).
+    pub kp: f32,
+    /// Velocity gain, N·m·s/rad (0–5).
+    pub kd: f32,
+    /// Feed-forward torque in N·m.
+    pub torque_nm: f32,
+}
+
+impl MitCommand {
+    /// Zero gains and zero torque: the motor produces no torque.
+    pub const ZERO_TORQUE: Self = Self {
+        position_rad: 0.0,
+        velocity_rad_s: 0.0,
+        kp: 0.0,
+        kd: 0.0,
+        torque_nm: 0.0,
+    };
+
+    /// The eight data bytes, every field clamped to its range first.
+    pub fn pack(&self, limits: &MitLimits) -> [u8; 8] {
+        let p = float_to_uint(self.position_rad, limits.p_max_rad, 16);
+        let v = float_to_uint(self.velocity_rad_s, limits.v_max_rad_s, 12);
+        let kp = to_uint(self.kp, 0.0, KP_MAX, 12);
+        let kd = to_uint(self.kd, 0.0, KD_MAX, 12);
+        let t = float_to_uint(self.torque_nm, limits.t_max_nm, 12);
+        [
+            (p >> 8) as u8,
+            p as u8,
+            (v >> 4) as u8,
+            (((v & 0xF) << 4) | (kp >> 8)) as u8,
+            kp as u8,
+            (kd >> 4) as u8,
+            (((kd & 0xF) << 4) | (t >> 8)) as u8,
+            t as u8,
+        ]
+    }
+}
+
+/// Whether a gain is within `[0, max]`.
+const fn ok(x: f32, max: f32) -> bool {
+    x.is_finite() && x >= 0.0 && x <= max
+}
+
+/// Maps `x ∈ [-max, max]` to `bits` bits.
+fn float_to_uint(x: f32, max: f32, bits: u32) -> u32 {
+    to_uint(x, -max, max, bits)
+}
+
+/// Clamps `x` into `[min, max]` (NaN → the value nearest 0) and truncates to `bits` bits as
+/// Damiao's reference code does.
+fn to_uint(x: f32, min: f32, max: f32, bits: u32) -> u32 {
+    let span = max - min;
+    let full = ((1u32 << bits) - 1) as f32;
+    if span.is_nan() || span <= 0.0 {
+        return 0;
+    }
+    let scaled = (constrain(x, min, max) - min) * full / span;
+    constrain(scaled, 0.0, full) as u32
+}
+
+fn uint_to_float(raw: u32, max: f32, bits: u32) -> f32 {
+    let full = ((1u32 << bits) - 1) as f32;
+    raw as f32 * (2.0 * max) / full - max
+}
+
+/// A one-shot special command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DmSpecial {
+    /// Enter motor mode (FC).
+    Enable,
+    /// Leave motor mode (FD).
+    Disable,
+    /// Make the present position zero (FE).
+    SaveZero,
+    /// Clear a latched error (FB).
+    ClearError,
+}
+
+impl DmSpecial {
+    /// The eight data bytes.
+    pub const fn bytes(self) -> [u8; 8] {
+        let last = match self {
+            Self::Enable => 0xFC,
+            Self::Disable => 0xFD,
+            Self::SaveZero => 0xFE,
+            Self::ClearError => 0xFB,
+        };
+        [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, last]
+    }
+}
+
+/// A fault the motor reports in its feedback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DmFault {
+    /// 8: supply over-voltage.
+    OverVoltage,
+    /// 9: supply under-voltage.
+    UnderVoltage,
+    /// A: over-current.
+    OverCurrent,
+    /// B: MOSFET over-temperature.
+    MosOverTemperature,
+    /// C: coil over-temperature.
+    CoilOverTemperature,
+    /// D: communication lost (the motor's own command timeout).
+    CommunicationLost,
+    /// E: overload.
+    Overload,
+    /// A state code this driver does not know.
+    Unknown(u8),
+}
+
+/// The motor's state from its feedback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DmStatus {
+    /// Not in motor mode (no torque).
+    #[default]
+    Disabled,
+    /// In motor mode.
+    Enabled,
+    /// Latched fault; send [`DmSpecial::ClearError`] to leave it.
+    Fault(DmFault),
+}
+
+impl DmStatus {
+    const fn from_code(code: u8) -> Self {
+        match code {
+            0 => Self::Disabled,
+            1 => Self::Enabled,
+            8 => Self::Fault(DmFault::OverVoltage),
+            9 => Self::Fault(DmFault::UnderVoltage),
+            0xA => Self::Fault(DmFault::OverCurrent),
+            0xB => Self::Fault(DmFault::MosOverTemperature),
+            0xC => Self::Fault(DmFault::CoilOverTemperature),
+            0xD => Self::Fault(DmFault::CommunicationLost),
+            0xE => Self::Fault(DmFault::Overload),
+            other => Self::Fault(DmFault::Unknown(other)),
+        }
+    }
+}
+
+/// Configuration of a Damiao motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DmConfig {
+    /// Ranges set in the motor.
+    pub limits: MitLimits,
+    /// The master ID its feedback arrives on (MST_ID in Damiao's tool; give each motor its own).
+    pub master_id: u16,
+    /// Velocity gain used by [`Motor::set_target_rpm`], N·m·s/rad.
+    pub speed_kd: f32,
+    /// Position gain used by the angle targets, N·m/rad.
+    pub position_kp: f32,
+    /// Velocity gain used by the angle targets, N·m·s/rad.
+    pub position_kd: f32,
+    /// Send Enable automatically while the motor reports Disabled and a target is set (never
+    /// while it reports a fault: faults are cleared explicitly).
+    pub auto_enable: bool,
+    /// Gearbox of the motor (informational: positions are already of the output shaft).
+    pub gear: GearRatio,
+    /// Offline timeout.
+    pub health: HealthConfig,
+}
+
+impl DmConfig {
+    /// DM4310 defaults with feedback on `master_id`: factory ranges, speed kd 1.0, position
+    /// kp 20 / kd 1.0, auto-enable, 10:1 gear, 100 ms offline timeout.
+    pub const fn new(master_id: u16) -> Self {
+        Self {
+            limits: MitLimits::DEFAULT,
+            master_id,
+            speed_kd: 1.0,
+            position_kp: 20.0,
+            position_kd: 1.0,
+            auto_enable: true,
+            gear: match GearRatio::new(10, 1) {
+                Some(g) => g,
+                None => GearRatio::DIRECT,
+            },
+            health: HealthConfig::DEFAULT,
+        }
+    }
+}
+
+/// Why a Damiao motor could not be created.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DmError {
+    /// The CAN ID or master ID is above 0x7FF, or they are equal.
+    InvalidId,
+    /// A range or gain is not finite and positive (gains: not within the protocol's range).
+    InvalidLimit,
+}
+
+impl fmt::Display for DmError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::InvalidId => "DM CAN ID or master ID invalid",
+            Self::InvalidLimit => "DM range or gain invalid",
+        })
+    }
+}
+
+impl core::error::Error for DmError {}
+
+#[derive(Debug)]
+struct DmState {
+    mode: ControlMode,
+    target: f32,
+    user_mit: MitCommand,
+    pending: Option<DmSpecial>,
+    status: DmStatus,
+    position_rad: Option<f32>,
+    wraps: i32,
+    velocity_rad_s: f32,
+    torque_nm: f32,
+    mos_temp_c: f32,
+    rotor_temp_c: f32,
+    last_feedback: Option<Instant>,
+    online: bool,
+    offline_events: u32,
+    torque_ff_nm: f32,
+    out: [u8; 8],
+}
+
+impl DmState {
+    fn total_position_rad(&self, p_max: f32) -> f32 {
+        self.position_rad.unwrap_or(0.0) + self.wraps as f32 * 2.0 * p_max
+    }
+}
+
+/// A Damiao motor in MIT mode on a CAN bus.
+///
+/// ```
+/// use rc10_core::motor::Motor;
+/// use rc10_core::motor::dm::{DmConfig, DmMotor};
+/// let joint = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+/// joint.set_target_total_angle_deg(90.0).unwrap();
+/// assert!(!joint.is_online());
+/// ```
+pub struct DmMotor {
+    can_id: u16,
+    config: DmConfig,
+    state: Mutex<CriticalSectionRawMutex, RefCell<DmState>>,
+}
+
+impl DmMotor {
+    /// A motor commanded on `can_id` whose feedback arrives on `config.master_id`.
+    pub const fn new(can_id: u16, config: DmConfig) -> Result<Self, DmError> {
+        if can_id > 0x7FF || config.master_id > 0x7FF || can_id == config.master_id {
+            return Err(DmError::InvalidId);
+        }
+        let l = config.limits;
+        if !(l.p_max_rad.is_finite() && l.p_max_rad > 0.0)
+            || !(l.v_max_rad_s.is_finite() && l.v_max_rad_s > 0.0)
+            || !(l.t_max_nm.is_finite() && l.t_max_nm > 0.0)
+            || !ok(config.speed_kd, KD_MAX)
+            || !ok(config.position_kp, KP_MAX)
+            || !ok(config.position_kd, KD_MAX)
+        {
+            return Err(DmError::InvalidLimit);
+        }
+        Ok(Self {
+            can_id,
+            config,
+            state: Mutex::new(RefCell::new(DmState {
+                mode: ControlMode::Disabled,
+                target: 0.0,
+                user_mit: MitCommand::ZERO_TORQUE,
+                pending: None,
+                status: DmStatus::Disabled,
+                position_rad: None,
+                wraps: 0,
+                velocity_rad_s: 0.0,
+                torque_nm: 0.0,
+                mos_temp_c: 0.0,
+                rotor_temp_c: 0.0,
+                last_feedback: None,
+                online: false,
+                offline_events: 0,
+                torque_ff_nm: 0.0,
+                out: [0; 8],
+            })),
+        })
+    }
+
+    /// The CAN ID commands go to.
+    pub const fn can_id(&self) -> u16 {
+        self.can_id
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &DmConfig {
+        &self.config
+    }
+
+    /// Sends a raw MIT command every tick from now on (fields clamped when packed).
+    pub fn set_mit(&self, command: MitCommand) -> Result<(), TargetError> {
+        let c = command;
+        if ![c.position_rad, c.velocity_rad_s, c.kp, c.kd, c.torque_nm]
+            .iter()
+            .all(|x| x.is_finite())
+        {
+            return Err(TargetError::NotFinite);
+        }
+        self.state.lock(|s| {
+            let mut s = s.borrow_mut();
+            s.mode = ControlMode::Current;
+            s.target = c.torque_nm;
+            s.user_mit = c;
+        });
+        Ok(())
+    }
+
+    /// Commands a torque in N·m (MIT with zero gains).
+    pub fn set_target_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        self.set_mit(MitCommand {
+            torque_nm,
+            ..MitCommand::ZERO_TORQUE
+        })
+    }
+
+    /// Sends `special` once, on the next tick, instead of that tick's MIT command.
+    pub fn send_special(&self, special: DmSpecial) {
+        self.state.lock(|s| s.borrow_mut().pending = Some(special));
+    }
+
+    /// The motor's reported state.
+    pub fn status(&self) -> DmStatus {
+        self.state.lock(|s| s.borrow().status)
+    }
+
+    /// Last measured torque in N·m.
+    pub fn torque_nm(&self) -> f32 {
+        self.state.lock(|s| s.borrow().torque_nm)
+    }
+
+    /// MOSFET and rotor temperatures in °C.
+    pub fn temperatures_c(&self) -> (f32, f32) {
+        self.state.lock(|s| {
+            let s = s.borrow();
+            (s.mos_temp_c, s.rotor_temp_c)
+        })
+    }
+
+    fn set(&self, mode: ControlMode, target: f32) -> Result<(), TargetError> {
+        if !target.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.state.lock(|s| {
+            let mut s = s.borrow_mut();
+            s.mode = mode;
+            s.target = target;
+        });
+        Ok(())
+    }
+
+    fn mit_for(&self, s: &DmState) -> MitCommand {
+        let c = &self.config;
+        let p_max = c.limits.p_max_rad;
+        match s.mode {
+            ControlMode::Disabled | ControlMode::Voltage => MitCommand::ZERO_TORQUE,
+            ControlMode::Current => s.user_mit,
+            ControlMode::Speed => MitCommand {
+                velocity_rad_s: s.target * TAU / 60.0,
+                kd: c.speed_kd,
+                ..MitCommand::ZERO_TORQUE
+            },
+            ControlMode::Angle | ControlMode::TotalAngle => {
+                // The MIT position field is the motor's own (wrapped) position: express the
+                // target relative to it so the motor turns the intended way.
+                let now_rad = s.position_rad.unwrap_or(0.0);
+                let total_now = s.total_position_rad(p_max);
+                let error_rad = if s.mode == ControlMode::Angle {
+                    deg_to_rad(wrap_signed(s.target - rad_to_deg(total_now), 360.0))
+                } else {
+                    deg_to_rad(s.target) - total_now
+                };
+                MitCommand {
+                    position_rad: now_rad + error_rad,
+                    kp: c.position_kp,
+                    kd: c.position_kd,
+                    ..MitCommand::ZERO_TORQUE
+                }
+            }
+        }
+    }
+}
+
+impl CanNode for DmMotor {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage {
+            listen: Some(IdFilter::standard(self.config.master_id)),
+            // The motor answers every command frame.
+            feedback_hz: 1000,
+            feedback_extended: false,
+            command_slot: None,
+            command_frames_per_tick: 1,
+            command_extended: false,
+        }
+    }
+
+    fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
+        let d = frame.data8().ok_or(FrameError::WrongLength {
+            dlc: frame.dlc() as u8,
+        })?;
+        if u16::from(d[0] & 0x0F) != self.can_id & 0x0F {
+            return Err(FrameError::OutOfRange); // another motor's reply on this master ID
+        }
+        let l = self.config.limits;
+        let p = uint_to_float(u32::from(u16::from_be_bytes([d[1], d[2]])), l.p_max_rad, 16);
+        let v_raw = (u32::from(d[3]) << 4) | (u32::from(d[4]) >> 4);
+        let t_raw = ((u32::from(d[4]) & 0xF) << 8) | u32::from(d[5]);
+        self.state.lock(|s| {
+            let mut s = s.borrow_mut();
+            if let Some(prev) = s.position_rad {
+                if p - prev > l.p_max_rad {
+                    s.wraps -= 1;
+                } else if prev - p > l.p_max_rad {
+                    s.wraps += 1;
+                }
+            }
+            s.position_rad = Some(p);
+            s.velocity_rad_s = uint_to_float(v_raw, l.v_max_rad_s, 12);
+            s.torque_nm = uint_to_float(t_raw, l.t_max_nm, 12);
+            s.status = DmStatus::from_code(d[0] >> 4);
+            s.mos_temp_c = f32::from(d[6]);
+            s.rotor_temp_c = f32::from(d[7]);
+            s.last_feedback = Some(now);
+        });
+        Ok(())
+    }
+
+    fn update(&self, now: Instant, _dt_s: f32) {
+        let health = self.config.health;
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            let online = health.is_online(s.last_feedback, now);
+            if s.online && !online {
+                s.offline_events = s.offline_events.wrapping_add(1);
+            }
+            s.online = online;
+            let mit = if online {
+                self.mit_for(&s)
+            } else {
+                MitCommand::ZERO_TORQUE
+            };
+            s.torque_ff_nm = mit.torque_nm;
+            s.out = if let Some(special) = s.pending.take() {
+                special.bytes()
+            } else if self.config.auto_enable
+                && s.status == DmStatus::Disabled
+                && s.mode != ControlMode::Disabled
+            {
+                // Also what brings a motor that has not answered yet into motor mode.
+                DmSpecial::Enable.bytes()
+            } else {
+                mit.pack(&self.config.limits)
+            };
+        });
+    }
+
+    fn pack_command(&self, out: &mut TxBatch) {
+        let bytes = self.state.lock(|s| s.borrow().out);
+        if let Some(frame) = CanFrame::standard(self.can_id, &bytes) {
+            let _ = out.push(frame);
+        }
+    }
+}
+
+impl Motor for DmMotor {
+    /// Damiao motors take torque, not current: use
+    /// [`set_target_torque_nm`](DmMotor::set_target_torque_nm).
+    fn set_target_current(&self, _amps: f32) -> Result<(), TargetError> {
+        Err(TargetError::Unsupported)
+    }
+
+    fn set_target_rpm(&self, rpm: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Speed, rpm)
+    }
+
+    fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Angle, angle_deg)
+    }
+
+    /// The target is reached through the MIT position field, so it must lie within `±p_max`
+    /// of the present position (12.5 rad ≈ 716° by default); farther targets are approached
+    /// up to that distance and then continued on the following ticks.
+    fn set_target_total_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::TotalAngle, angle_deg)
+    }
+
+    fn disable(&self) {
+        let _ = self.set(ControlMode::Disabled, 0.0);
+    }
+
+    fn state(&self) -> MotorState {
+        self.state.lock(|cell| {
+            let s = cell.borrow();
+            let total_deg = rad_to_deg(s.total_position_rad(self.config.limits.p_max_rad));
+            MotorState {
+                online: s.online,
+                mode: s.mode,
+                target: s.target,
+                speed_rpm: s.velocity_rad_s * 60.0 / TAU,
+                angle_deg: wrap_deg_360(total_deg),
+                total_angle_deg: total_deg,
+                current_amps: None,
+                temperature_c: Some(s.rotor_temp_c.max(s.mos_temp_c)),
+                command: s.torque_ff_nm,
+                offline_events: s.offline_events,
+                last_feedback: s.last_feedback,
+            }
+        })
+    }
+
+    fn gear_ratio(&self) -> GearRatio {
+        self.config.gear
+    }
+}
+
+impl fmt::Debug for DmMotor {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("DmMotor")
+            .field("can_id", &self.can_id)
+            .field("master_id", &self.config.master_id)
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const T0: Instant = Instant::from_millis(7);
+
+    fn feedback(state: u8, id: u8, p: u16, v: u16, t: u16, mos: u8, rotor: u8) -> CanFrame {
+        let d = [
+            id | (state << 4),
+            (p >> 8) as u8,
+            p as u8,
+            (v >> 4) as u8,
+            (((v & 0xF) << 4) | (t >> 8)) as u8,
+            t as u8,
+            mos,
+            rotor,
+        ];
+        CanFrame::standard(0x11, &d).unwrap()
+    }
+
+    fn packed(m: &DmMotor, now: Instant) -> [u8; 8] {
+        let mut b = TxBatch::new();
+        m.update(now, 0.001);
+        m.pack_command(&mut b);
+        assert_eq!(b.frames().len(), 1);
+        assert_eq!(b.frames()[0].raw_id(), u32::from(m.can_id()));
+        *b.frames()[0].data8().unwrap()
+    }
+
+    #[test]
+    fn mit_pack_matches_hand_computed_bits() {
+        // p = 0 → (12.5)·65535/25 = 32767.5 → 32767 = 0x7FFF; v = 15 → 45·4095/60 = 3071.25
+        // → 3071 = 0xBFF; kp = 250 → 2047.5 → 2047 = 0x7FF; kd = 5 → 4095 = 0xFFF;
+        // t = -10 → 0 = 0x000.
+        let cmd = MitCommand {
+            position_rad: 0.0,
+            velocity_rad_s: 15.0,
+            kp: 250.0,
+            kd: 5.0,
+            torque_nm: -10.0,
+        };
+        assert_eq!(
+            cmd.pack(&MitLimits::DEFAULT),
+            [0x7F, 0xFF, 0xBF, 0xF7, 0xFF, 0xFF, 0xF0, 0x00]
+        );
+    }
+
+    #[test]
+    fn mit_pack_clamps_instead_of_spilling_into_neighbours() {
+        // Torque 1000 N·m would be 0x61F3E without clamping and overwrite kd's low nibble.
+        let cmd = MitCommand {
+            torque_nm: 1000.0,
+            kd: 0.0,
+            ..MitCommand::ZERO_TORQUE
+        };
+        let b = cmd.pack(&MitLimits::DEFAULT);
+        assert_eq!((b[6], b[7]), (0x0F, 0xFF)); // kd nibble 0, torque 0xFFF
+        let nan = MitCommand {
+            position_rad: f32::NAN,
+            velocity_rad_s: f32::NEG_INFINITY,
+            ..MitCommand::ZERO_TORQUE
+        };
+        let b = nan.pack(&MitLimits::DEFAULT);
+        // NaN → 0 rad → 0x7FFF; -inf → -30 rad/s → 0x000.
+        assert_eq!((b[0], b[1], b[2], b[3] >> 4), (0x7F, 0xFF, 0x00, 0x0));
+    }
+
+    #[test]
+    fn special_commands_bytes() {
+        assert_eq!(DmSpecial::Enable.bytes()[7], 0xFC);
+        assert_eq!(DmSpecial::Disable.bytes()[7], 0xFD);
+        assert_eq!(DmSpecial::SaveZero.bytes()[7], 0xFE);
+        assert_eq!(DmSpecial::ClearError.bytes()[..7], [0xFF; 7]);
+        assert_eq!(DmSpecial::ClearError.bytes()[7], 0xFB);
+    }
+
+    #[test]
+    fn feedback_parsed_with_state_and_temperatures() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        // p 0xFFFF = +12.5 rad, v 0x800 = 2048 → 2048·60/4095 - 30 = 0.00733 rad/s,
+        // t 0xFFF = +10 N·m, state 1 (enabled), 40 °C MOS, 55 °C rotor.
+        m.update_feedback(&feedback(1, 1, 0xFFFF, 0x800, 0xFFF, 40, 55), T0)
+            .unwrap();
+        let s = m.state();
+        assert!((s.total_angle_deg - rad_to_deg(12.5)).abs() < 1e-3);
+        assert!((s.speed_rpm - 0.00733 * 60.0 / TAU).abs() < 1e-3);
+        assert_eq!(m.torque_nm(), 10.0);
+        assert_eq!(m.status(), DmStatus::Enabled);
+        assert_eq!(m.temperatures_c(), (40.0, 55.0));
+        assert_eq!(s.current_amps, None);
+    }
+
+    #[test]
+    fn fault_codes_decode() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        for (code, fault) in [
+            (8, DmFault::OverVoltage),
+            (0xA, DmFault::OverCurrent),
+            (0xC, DmFault::CoilOverTemperature),
+            (0xD, DmFault::CommunicationLost),
+            (0xE, DmFault::Overload),
+        ] {
+            m.update_feedback(&feedback(code, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+                .unwrap();
+            assert_eq!(m.status(), DmStatus::Fault(fault));
+        }
+    }
+
+    #[test]
+    fn position_unwraps_across_the_range_end() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0xFFF0, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let before = m.total_angle_deg();
+        // Wraps from +12.5 to -12.5 rad while turning forward by a few counts.
+        m.update_feedback(&feedback(1, 1, 0x0010, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        // Codes 65535 (+12.5 rad) and 0 (-12.5 rad) are the same point on the 25 rad circle,
+        // so 0xFFF0 → 0x0010 is 15 + 16 = 31 codes of 25/65535 rad.
+        let step_deg = rad_to_deg(31.0 * 25.0 / 65535.0);
+        assert!((m.total_angle_deg() - before - step_deg).abs() < 0.01);
+    }
+
+    #[test]
+    fn wrong_motor_nibble_and_short_frames_are_rejected() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        assert_eq!(
+            m.update_feedback(&feedback(1, 2, 0, 0, 0, 0, 0), T0),
+            Err(FrameError::OutOfRange)
+        );
+        let short = CanFrame::standard(0x11, &[1, 2, 3]).unwrap();
+        assert_eq!(
+            m.update_feedback(&short, T0),
+            Err(FrameError::WrongLength { dlc: 3 })
+        );
+    }
+
+    #[test]
+    fn auto_enable_then_mit_speed_command() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.set_target_rpm(60.0).unwrap(); // 2π rad/s
+        // Never answered yet: the enable frame goes out first.
+        assert_eq!(packed(&m, T0), DmSpecial::Enable.bytes());
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let expect = MitCommand {
+            velocity_rad_s: TAU,
+            kd: 1.0,
+            ..MitCommand::ZERO_TORQUE
+        }
+        .pack(&MitLimits::DEFAULT);
+        assert_eq!(packed(&m, T0), expect);
+    }
+
+    #[test]
+    fn fault_is_not_auto_cleared_and_special_goes_once() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.set_target_rpm(10.0).unwrap();
+        m.update_feedback(&feedback(0xA, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        assert_ne!(packed(&m, T0), DmSpecial::Enable.bytes());
+        m.send_special(DmSpecial::ClearError);
+        assert_eq!(packed(&m, T0), DmSpecial::ClearError.bytes());
+        assert_ne!(packed(&m, T0), DmSpecial::ClearError.bytes());
+    }
+
+    #[test]
+    fn offline_sends_zero_torque() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.set_target_torque_nm(5.0).unwrap();
+        let later = T0 + crate::time::Duration::from_millis(200);
+        assert_eq!(
+            packed(&m, later),
+            MitCommand::ZERO_TORQUE.pack(&MitLimits::DEFAULT)
+        );
+        assert!(!m.is_online());
+    }
+
+    #[test]
+    fn angle_target_goes_short_way_relative_to_present_position() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        // Present position 0 rad (0x7FFF ≈ -0.0002 rad), target 350°: the short way is -10°.
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.set_target_angle_deg(350.0).unwrap();
+        let bytes = packed(&m, T0);
+        let p = uint_to_float(
+            u32::from(u16::from_be_bytes([bytes[0], bytes[1]])),
+            12.5,
+            16,
+        );
+        assert!((p - deg_to_rad(-10.0)).abs() < 1e-3, "p = {p}");
+    }
+
+    #[test]
+    fn invalid_ids_and_gains_rejected() {
+        assert_eq!(
+            DmMotor::new(0x11, DmConfig::new(0x11)).unwrap_err(),
+            DmError::InvalidId
+        );
+        let mut cfg = DmConfig::new(0x11);
+        cfg.position_kp = 600.0;
+        assert_eq!(DmMotor::new(1, cfg).unwrap_err(), DmError::InvalidLimit);
+        let m = DmMotor::new(1, DmConfig::new(0x11)).unwrap();
+        assert_eq!(m.set_target_current(1.0), Err(TargetError::Unsupported));
+    }
+}

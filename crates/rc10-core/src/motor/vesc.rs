@@ -1,0 +1,605 @@
+//! VESC motor controllers over CAN (the VESC firmware's `comm_can` protocol).
+//!
+//! Every frame uses an extended ID `(packet << 8) | controller_id` and big-endian integers:
+//!
+//! | packet | # | payload |
+//! |---|---|---|
+//! | `SET_DUTY` | 0 | i32 duty cycle × 100 000 |
+//! | `SET_CURRENT` | 1 | i32 motor current in mA |
+//! | `SET_CURRENT_BRAKE` | 2 | i32 brake current in mA |
+//! | `SET_RPM` | 3 | i32 electrical rpm (eRPM = mechanical rotor rpm × pole pairs) |
+//! | `SET_POS` | 4 | i32 rotor position in degrees × 1 000 000 |
+//! | `STATUS` (1) | 9 | i32 eRPM, i16 motor current × 10, i16 duty × 1000 |
+//! | `STATUS_4` | 16 | i16 MOSFET temp × 10, i16 motor temp × 10, i16 input current × 10, i16 PID position × 50 |
+//!
+//! The VESC runs its own current, speed and position loops; this driver converts targets and
+//! feedback between output-shaft units and the VESC's (pole pairs and gear ratio are explicit)
+//! and clamps every command to the configured limits before the integer conversion.
+//!
+//! RC10_LIB turned an eRPM target of 0 into a hard brake. Here that is an explicit option,
+//! [`VescConfig::zero_speed_brake_amps`]: `Some(amps)` sends `SET_CURRENT_BRAKE` instead of
+//! `SET_RPM 0` (holds a wheel still without the speed loop's hunting); `None` (default) sends
+//! `SET_RPM 0`. While offline or disabled the driver sends `SET_CURRENT 0`, which releases the
+//! motor.
+
+use super::{ControlMode, HealthConfig, Motor, MotorState, TargetError};
+use crate::can::{CanFrame, IdFilter};
+use crate::encoder::GearRatio;
+use crate::math::{saturate, wrap_deg_360};
+use crate::node::{BusUsage, CanNode, FrameError, TxBatch};
+use crate::time::Instant;
+use core::cell::RefCell;
+use core::fmt;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+/// VESC CAN packet numbers used here (`CAN_PACKET_ID` in the VESC firmware).
+pub mod packet {
+    /// Set duty cycle.
+    pub const SET_DUTY: u8 = 0;
+    /// Set motor current.
+    pub const SET_CURRENT: u8 = 1;
+    /// Set brake current.
+    pub const SET_CURRENT_BRAKE: u8 = 2;
+    /// Set electrical rpm.
+    pub const SET_RPM: u8 = 3;
+    /// Set rotor position.
+    pub const SET_POS: u8 = 4;
+    /// Status 1: eRPM, current, duty.
+    pub const STATUS: u8 = 9;
+    /// Status 2: amp-hours.
+    pub const STATUS_2: u8 = 14;
+    /// Status 3: watt-hours.
+    pub const STATUS_3: u8 = 15;
+    /// Status 4: temperatures, input current, PID position.
+    pub const STATUS_4: u8 = 16;
+    /// Status 5: tachometer, input voltage.
+    pub const STATUS_5: u8 = 27;
+}
+
+/// A command as the VESC receives it (physical units of the motor, before scaling).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum VescCommand {
+    /// Duty cycle, −1…1.
+    Duty(f32),
+    /// Motor current in amps (0 releases the motor).
+    Current(f32),
+    /// Brake current in amps (positive).
+    Brake(f32),
+    /// Electrical rpm.
+    Erpm(f32),
+    /// Rotor position in degrees, [0, 360).
+    Position(f32),
+}
+
+impl VescCommand {
+    /// The frame for controller `vesc_id`.
+    pub fn to_frame(self, vesc_id: u8) -> Option<CanFrame> {
+        let (packet, value) = match self {
+            Self::Duty(d) => (packet::SET_DUTY, d * 100_000.0),
+            Self::Current(a) => (packet::SET_CURRENT, a * 1000.0),
+            Self::Brake(a) => (packet::SET_CURRENT_BRAKE, a * 1000.0),
+            Self::Erpm(e) => (packet::SET_RPM, e),
+            Self::Position(deg) => (packet::SET_POS, deg * 1_000_000.0),
+        };
+        // `as` saturates at the i32 range and maps NaN to 0: no wrap, no sign flip.
+        let raw = libm::roundf(value) as i32;
+        CanFrame::extended(
+            (u32::from(packet) << 8) | u32::from(vesc_id),
+            &raw.to_be_bytes(),
+        )
+    }
+}
+
+/// Configuration of a VESC-driven motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VescConfig {
+    /// Motor pole pairs (poles / 2): eRPM = rotor rpm × pole pairs.
+    pub pole_pairs: u8,
+    /// Gear ratio from the rotor to the output shaft.
+    pub gear: GearRatio,
+    /// Current commands are clamped to ±this, in amps.
+    pub max_current_amps: f32,
+    /// Brake commands are clamped to this, in amps.
+    pub max_brake_amps: f32,
+    /// Output-shaft speed targets are clamped to ±this, in rpm.
+    pub max_speed_rpm: f32,
+    /// Send a brake current (amps) instead of `SET_RPM 0` for a zero speed target.
+    pub zero_speed_brake_amps: Option<f32>,
+    /// STATUS frames per second the VESC is set to send (VESC Tool, "CAN status rate").
+    pub status_hz: u32,
+    /// Offline timeout and multi-turn policy (thermal limits are enforced by the VESC).
+    pub health: HealthConfig,
+}
+
+impl VescConfig {
+    /// Direct drive with `pole_pairs`, 60 A, 20 A brake, 10 000 rpm, no zero-speed brake,
+    /// status at 1 kHz, 100 ms offline timeout.
+    pub const fn new(pole_pairs: u8) -> Self {
+        Self {
+            pole_pairs,
+            gear: GearRatio::DIRECT,
+            max_current_amps: 60.0,
+            max_brake_amps: 20.0,
+            max_speed_rpm: 10_000.0,
+            zero_speed_brake_amps: None,
+            status_hz: 1000,
+            health: HealthConfig::DEFAULT,
+        }
+    }
+
+    /// Output rpm to eRPM.
+    fn erpm_per_rpm(&self) -> f32 {
+        self.gear.as_f32() * f32::from(self.pole_pairs)
+    }
+}
+
+/// Why a VESC motor could not be created.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum VescError {
+    /// Pole pairs must be at least 1.
+    ZeroPolePairs,
+    /// A limit is NaN or negative.
+    InvalidLimit,
+}
+
+impl fmt::Display for VescError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::ZeroPolePairs => "VESC pole pairs must be at least 1",
+            Self::InvalidLimit => "VESC limit is NaN or negative",
+        })
+    }
+}
+
+impl core::error::Error for VescError {}
+
+#[derive(Debug)]
+struct VescState {
+    mode: ControlMode,
+    target: f32,
+    duty_target: Option<f32>,
+    brake_target: Option<f32>,
+    erpm: f32,
+    current_amps: f32,
+    duty: f32,
+    fet_temp_c: Option<f32>,
+    motor_temp_c: Option<f32>,
+    last_feedback: Option<Instant>,
+    online: bool,
+    offline_events: u32,
+    command: VescCommand,
+}
+
+/// A motor driven by a VESC on a CAN bus.
+///
+/// ```
+/// use rc10_core::motor::Motor;
+/// use rc10_core::motor::vesc::{VescConfig, VescMotor};
+/// use rc10_core::node::{CanNode, TxBatch};
+/// use rc10_core::time::Instant;
+///
+/// let wheel = VescMotor::new(7, VescConfig::new(7)).unwrap(); // 14-pole motor
+/// wheel.set_target_rpm(1000.0).unwrap();
+/// // Online after a STATUS frame: eRPM 0, 0 A, duty 0.
+/// let status = rc10_core::can::CanFrame::extended(0x0907, &[0; 8]).unwrap();
+/// wheel.update_feedback(&status, Instant::from_millis(1)).unwrap();
+/// let mut out = TxBatch::new();
+/// wheel.update(Instant::from_millis(1), 0.001);
+/// wheel.pack_command(&mut out);
+/// // SET_RPM (3) to controller 7: 7000 eRPM = 0x00001B58.
+/// assert_eq!(out.frames()[0].raw_id(), 0x0307);
+/// assert_eq!(out.frames()[0].data(), &[0x00, 0x00, 0x1B, 0x58]);
+/// ```
+pub struct VescMotor {
+    vesc_id: u8,
+    config: VescConfig,
+    state: Mutex<CriticalSectionRawMutex, RefCell<VescState>>,
+}
+
+impl VescMotor {
+    /// A VESC with CAN controller id `vesc_id` (any 0–255).
+    pub const fn new(vesc_id: u8, config: VescConfig) -> Result<Self, VescError> {
+        if config.pole_pairs == 0 {
+            return Err(VescError::ZeroPolePairs);
+        }
+        const fn bad(limit: f32) -> bool {
+            limit.is_nan() || limit < 0.0
+        }
+        if bad(config.max_current_amps) || bad(config.max_brake_amps) || bad(config.max_speed_rpm) {
+            return Err(VescError::InvalidLimit);
+        }
+        if let Some(b) = config.zero_speed_brake_amps
+            && (b.is_nan() || b < 0.0)
+        {
+            return Err(VescError::InvalidLimit);
+        }
+        Ok(Self {
+            vesc_id,
+            config,
+            state: Mutex::new(RefCell::new(VescState {
+                mode: ControlMode::Disabled,
+                target: 0.0,
+                duty_target: None,
+                brake_target: None,
+                erpm: 0.0,
+                current_amps: 0.0,
+                duty: 0.0,
+                fet_temp_c: None,
+                motor_temp_c: None,
+                last_feedback: None,
+                online: false,
+                offline_events: 0,
+                command: VescCommand::Current(0.0),
+            })),
+        })
+    }
+
+    /// The controller id.
+    pub const fn vesc_id(&self) -> u8 {
+        self.vesc_id
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &VescConfig {
+        &self.config
+    }
+
+    /// Commands a duty cycle (−1…1, clamped).
+    pub fn set_duty(&self, duty: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Voltage, duty, Some(duty), None)
+    }
+
+    /// Commands a brake current in amps (taken by magnitude, clamped to the brake limit).
+    pub fn set_brake_current(&self, amps: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Current, 0.0, None, Some(amps))
+    }
+
+    /// Last measured duty cycle (−1…1).
+    pub fn duty(&self) -> f32 {
+        self.state.lock(|s| s.borrow().duty)
+    }
+
+    /// Last reported motor temperature in °C (from STATUS_4).
+    pub fn motor_temperature_c(&self) -> Option<f32> {
+        self.state.lock(|s| s.borrow().motor_temp_c)
+    }
+
+    /// The command the last tick produced.
+    pub fn last_command(&self) -> VescCommand {
+        self.state.lock(|s| s.borrow().command)
+    }
+
+    fn set(
+        &self,
+        mode: ControlMode,
+        target: f32,
+        duty: Option<f32>,
+        brake: Option<f32>,
+    ) -> Result<(), TargetError> {
+        if !target.is_finite() || duty.is_some_and(|d| !d.is_finite()) {
+            return Err(TargetError::NotFinite);
+        }
+        if brake.is_some_and(|b| !b.is_finite()) {
+            return Err(TargetError::NotFinite);
+        }
+        self.state.lock(|s| {
+            let mut s = s.borrow_mut();
+            s.mode = mode;
+            s.target = target;
+            s.duty_target = duty;
+            s.brake_target = brake;
+        });
+        Ok(())
+    }
+
+    fn command_for(&self, s: &VescState) -> VescCommand {
+        let c = &self.config;
+        match s.mode {
+            ControlMode::Disabled => VescCommand::Current(0.0),
+            ControlMode::Voltage => VescCommand::Duty(saturate(s.duty_target.unwrap_or(0.0), 1.0)),
+            ControlMode::Current => match s.brake_target {
+                Some(b) => VescCommand::Brake(saturate(b.abs(), c.max_brake_amps)),
+                None => VescCommand::Current(saturate(s.target, c.max_current_amps)),
+            },
+            ControlMode::Speed => {
+                let rpm = saturate(s.target, c.max_speed_rpm);
+                match c.zero_speed_brake_amps {
+                    Some(b) if rpm == 0.0 => VescCommand::Brake(saturate(b, c.max_brake_amps)),
+                    _ => VescCommand::Erpm(rpm * c.erpm_per_rpm()),
+                }
+            }
+            ControlMode::Angle => VescCommand::Position(wrap_deg_360(s.target)),
+            ControlMode::TotalAngle => VescCommand::Current(0.0),
+        }
+    }
+}
+
+impl CanNode for VescMotor {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage {
+            listen: Some(IdFilter::extended_masked(u32::from(self.vesc_id), 0xFF)),
+            feedback_hz: self.config.status_hz,
+            feedback_extended: true,
+            command_slot: None,
+            command_frames_per_tick: 1,
+            command_extended: true,
+        }
+    }
+
+    fn matches_frame(&self, frame: &CanFrame) -> bool {
+        frame.is_extended() && (frame.raw_id() & 0xFF) == u32::from(self.vesc_id)
+    }
+
+    fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
+        let packet = (frame.raw_id() >> 8) as u8;
+        match packet {
+            packet::STATUS => {
+                let d = frame.data8().ok_or(FrameError::WrongLength {
+                    dlc: frame.dlc() as u8,
+                })?;
+                let erpm = i32::from_be_bytes([d[0], d[1], d[2], d[3]]);
+                let current = i16::from_be_bytes([d[4], d[5]]);
+                let duty = i16::from_be_bytes([d[6], d[7]]);
+                self.state.lock(|s| {
+                    let mut s = s.borrow_mut();
+                    s.erpm = erpm as f32;
+                    s.current_amps = f32::from(current) / 10.0;
+                    s.duty = f32::from(duty) / 1000.0;
+                    s.last_feedback = Some(now);
+                });
+                Ok(())
+            }
+            packet::STATUS_4 => {
+                let d = frame.data8().ok_or(FrameError::WrongLength {
+                    dlc: frame.dlc() as u8,
+                })?;
+                let fet = i16::from_be_bytes([d[0], d[1]]);
+                let motor = i16::from_be_bytes([d[2], d[3]]);
+                self.state.lock(|s| {
+                    let mut s = s.borrow_mut();
+                    s.fet_temp_c = Some(f32::from(fet) / 10.0);
+                    s.motor_temp_c = Some(f32::from(motor) / 10.0);
+                });
+                Ok(())
+            }
+            // Known status packets this driver does not use.
+            packet::STATUS_2 | packet::STATUS_3 | packet::STATUS_5 => Ok(()),
+            _ => Err(FrameError::Unsupported),
+        }
+    }
+
+    fn update(&self, now: Instant, _dt_s: f32) {
+        let health = self.config.health;
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            let online = health.is_online(s.last_feedback, now);
+            if s.online && !online {
+                s.offline_events = s.offline_events.wrapping_add(1);
+            }
+            s.online = online;
+            s.command = if online {
+                self.command_for(&s)
+            } else {
+                VescCommand::Current(0.0)
+            };
+        });
+    }
+
+    fn pack_command(&self, out: &mut TxBatch) {
+        let command = self.state.lock(|s| s.borrow().command);
+        if let Some(frame) = command.to_frame(self.vesc_id) {
+            let _ = out.push(frame); // a full batch is counted by the batch
+        }
+    }
+}
+
+impl Motor for VescMotor {
+    fn set_target_current(&self, amps: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Current, amps, None, None)
+    }
+
+    fn set_target_rpm(&self, rpm: f32) -> Result<(), TargetError> {
+        self.set(ControlMode::Speed, rpm, None, None)
+    }
+
+    /// Position control uses the VESC's rotor position loop, so it is an output-shaft angle
+    /// only for direct drive; geared VESC motors report [`TargetError::Unsupported`].
+    fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        if self.config.gear != GearRatio::DIRECT {
+            return Err(TargetError::Unsupported);
+        }
+        self.set(ControlMode::Angle, angle_deg, None, None)
+    }
+
+    /// The VESC position loop is single-turn: not supported.
+    fn set_target_total_angle_deg(&self, _angle_deg: f32) -> Result<(), TargetError> {
+        Err(TargetError::Unsupported)
+    }
+
+    fn disable(&self) {
+        let _ = self.set(ControlMode::Disabled, 0.0, None, None);
+    }
+
+    fn state(&self) -> MotorState {
+        self.state.lock(|cell| {
+            let s = cell.borrow();
+            MotorState {
+                online: s.online,
+                mode: s.mode,
+                target: s.target,
+                speed_rpm: s.erpm / self.config.erpm_per_rpm(),
+                angle_deg: 0.0,
+                total_angle_deg: 0.0,
+                current_amps: Some(s.current_amps),
+                temperature_c: s.fet_temp_c,
+                command: match s.command {
+                    VescCommand::Current(a) => a,
+                    VescCommand::Brake(a) => -a,
+                    _ => 0.0,
+                },
+                offline_events: s.offline_events,
+                last_feedback: s.last_feedback,
+            }
+        })
+    }
+
+    fn gear_ratio(&self) -> GearRatio {
+        self.config.gear
+    }
+}
+
+impl fmt::Debug for VescMotor {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("VescMotor")
+            .field("vesc_id", &self.vesc_id)
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const T0: Instant = Instant::from_millis(3);
+
+    fn online(m: &VescMotor) {
+        let status = CanFrame::extended(0x0900 | u32::from(m.vesc_id()), &[0; 8]).unwrap();
+        m.update_feedback(&status, T0).unwrap();
+    }
+
+    fn packed(m: &VescMotor) -> (u32, Vec<u8>) {
+        let mut b = TxBatch::new();
+        m.update(T0, 0.001);
+        m.pack_command(&mut b);
+        assert_eq!(b.frames().len(), 1);
+        (b.frames()[0].raw_id(), b.frames()[0].data().to_vec())
+    }
+
+    #[test]
+    fn current_12_5a_is_12500_ma_on_packet_1() {
+        let m = VescMotor::new(0x42, VescConfig::new(7)).unwrap();
+        online(&m);
+        m.set_target_current(12.5).unwrap();
+        // 12 500 mA = 0x000030D4 on (1 << 8) | 0x42.
+        assert_eq!(packed(&m), (0x0142, vec![0x00, 0x00, 0x30, 0xD4]));
+        m.set_target_current(-1.0).unwrap();
+        assert_eq!(packed(&m).1, vec![0xFF, 0xFF, 0xFC, 0x18]); // -1000
+    }
+
+    #[test]
+    fn current_beyond_limit_is_clamped() {
+        let m = VescMotor::new(1, VescConfig::new(7)).unwrap();
+        online(&m);
+        m.set_target_current(1e9).unwrap();
+        assert_eq!(packed(&m).1, 60_000i32.to_be_bytes().to_vec());
+    }
+
+    #[test]
+    fn speed_target_converts_through_gear_and_pole_pairs() {
+        let mut cfg = VescConfig::new(7);
+        cfg.gear = GearRatio::new(5, 1).unwrap();
+        let m = VescMotor::new(3, cfg).unwrap();
+        online(&m);
+        m.set_target_rpm(-100.0).unwrap();
+        // -100 rpm · 5 · 7 = -3500 eRPM = 0xFFFFF254 on packet 3.
+        assert_eq!(packed(&m), (0x0303, vec![0xFF, 0xFF, 0xF2, 0x54]));
+    }
+
+    #[test]
+    fn zero_speed_brake_is_an_explicit_option() {
+        let m = VescMotor::new(3, VescConfig::new(7)).unwrap();
+        online(&m);
+        m.set_target_rpm(0.0).unwrap();
+        assert_eq!(packed(&m), (0x0303, vec![0, 0, 0, 0]));
+        let mut cfg = VescConfig::new(7);
+        cfg.zero_speed_brake_amps = Some(5.0);
+        let braking = VescMotor::new(3, cfg).unwrap();
+        online(&braking);
+        braking.set_target_rpm(0.0).unwrap();
+        // SET_CURRENT_BRAKE (2), 5000 mA = 0x1388.
+        assert_eq!(packed(&braking), (0x0203, vec![0, 0, 0x13, 0x88]));
+    }
+
+    #[test]
+    fn duty_brake_and_position_packets() {
+        let m = VescMotor::new(9, VescConfig::new(7)).unwrap();
+        online(&m);
+        m.set_duty(0.25).unwrap();
+        assert_eq!(packed(&m), (0x0009, 25_000i32.to_be_bytes().to_vec()));
+        m.set_duty(3.0).unwrap(); // clamped to 1.0
+        assert_eq!(packed(&m).1, 100_000i32.to_be_bytes().to_vec());
+        m.set_brake_current(-8.0).unwrap(); // magnitude
+        assert_eq!(packed(&m), (0x0209, 8_000i32.to_be_bytes().to_vec()));
+        m.set_target_angle_deg(-90.0).unwrap(); // 270° = 270 000 000
+        assert_eq!(packed(&m), (0x0409, 270_000_000i32.to_be_bytes().to_vec()));
+    }
+
+    #[test]
+    fn status_1_feedback_parsed() {
+        let mut cfg = VescConfig::new(7);
+        cfg.gear = GearRatio::new(2, 1).unwrap();
+        let m = VescMotor::new(5, cfg).unwrap();
+        // eRPM 14 000 = 0x000036B0, current 123.4 A → 1234 = 0x04D2, duty 0.5 → 500 = 0x01F4.
+        let f = CanFrame::extended(0x0905, &[0, 0, 0x36, 0xB0, 0x04, 0xD2, 0x01, 0xF4]).unwrap();
+        m.update_feedback(&f, T0).unwrap();
+        let s = m.state();
+        assert_eq!(s.speed_rpm, 1000.0); // 14 000 / 7 / 2
+        assert!((s.current_amps.unwrap() - 123.4).abs() < 1e-4);
+        assert_eq!(m.duty(), 0.5);
+        assert_eq!(s.last_feedback, Some(T0));
+    }
+
+    #[test]
+    fn status_4_gives_temperatures_and_unknown_packets_are_rejected() {
+        let m = VescMotor::new(5, VescConfig::new(7)).unwrap();
+        // FET 45.6 °C = 456 = 0x01C8, motor 70.0 °C = 700 = 0x02BC.
+        let f = CanFrame::extended(0x1005, &[0x01, 0xC8, 0x02, 0xBC, 0, 0, 0, 0]).unwrap();
+        m.update_feedback(&f, T0).unwrap();
+        assert!((m.state().temperature_c.unwrap() - 45.6).abs() < 1e-4);
+        assert_eq!(m.motor_temperature_c(), Some(70.0));
+        let unknown = CanFrame::extended(0x3F05, &[0; 8]).unwrap();
+        assert_eq!(
+            m.update_feedback(&unknown, T0),
+            Err(FrameError::Unsupported)
+        );
+        let short = CanFrame::extended(0x0905, &[0; 4]).unwrap();
+        assert_eq!(
+            m.update_feedback(&short, T0),
+            Err(FrameError::WrongLength { dlc: 4 })
+        );
+    }
+
+    #[test]
+    fn offline_releases_motor() {
+        let m = VescMotor::new(2, VescConfig::new(7)).unwrap();
+        online(&m);
+        m.set_target_rpm(500.0).unwrap();
+        let mut b = TxBatch::new();
+        m.update(T0 + crate::time::Duration::from_millis(150), 0.001);
+        m.pack_command(&mut b);
+        assert_eq!(b.frames()[0].raw_id(), 0x0102); // SET_CURRENT
+        assert_eq!(b.frames()[0].data(), &[0, 0, 0, 0]);
+        assert!(!m.is_online());
+    }
+
+    #[test]
+    fn geared_motor_refuses_angle_and_all_refuse_total_angle() {
+        let mut cfg = VescConfig::new(7);
+        cfg.gear = GearRatio::new(3, 1).unwrap();
+        let m = VescMotor::new(1, cfg).unwrap();
+        assert_eq!(m.set_target_angle_deg(10.0), Err(TargetError::Unsupported));
+        assert_eq!(
+            m.set_target_total_angle_deg(10.0),
+            Err(TargetError::Unsupported)
+        );
+        assert_eq!(m.set_target_rpm(f32::NAN), Err(TargetError::NotFinite));
+        assert_eq!(
+            VescMotor::new(1, VescConfig::new(0)).unwrap_err(),
+            VescError::ZeroPolePairs
+        );
+    }
+}
