@@ -1,10 +1,27 @@
-//! Host simulator for rc10.
+//! Host simulator for rc10: runs rc10-core's real bus, scheduler and drivers against a
+//! simulated CAN bus and physically modelled DJI ESC + motor plants, at the CAN-frame level,
+//! in deterministic virtual time.
 //!
-//! This crate is a skeleton: the simulated CAN bus, the motor plants, the scenarios and the
-//! command-line runner are being built (see the project's CHANGELOG). It depends on
-//! `rc10-core` so that it runs the same scheduler, motors and controllers as the firmware.
+//! - [`bus`]: the simulated bus (bit timing with stuffing, arbitration, TX buffer limits);
+//! - [`plant`]: ESC + motor models (current loop, back-EMF limit, friction, quantised
+//!   feedback, temperature);
+//! - [`scenario`]: motors, targets and faults, and the world loop;
+//! - [`metrics`]: step-response figures and the full-current minimum rise time;
+//! - [`output`]: metrics table, CSV traces, SVG plots.
+//!
+//! ```
+//! use rc10_sim::scenario::{builtin, run};
+//! let scenario = &builtin()[0]; // M3508 speed step
+//! let result = run(scenario).unwrap();
+//! let step = result.metrics[0].metrics;
+//! assert!(step.overshoot_percent <= 5.0);
+//! ```
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
-/// The rc10-core version this simulator drives.
-pub const CORE_VERSION: &str = env!("CARGO_PKG_VERSION");
+pub mod bus;
+pub mod legacy;
+pub mod metrics;
+pub mod output;
+pub mod plant;
+pub mod scenario;

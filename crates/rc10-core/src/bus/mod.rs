@@ -354,7 +354,7 @@ impl<'a, const N: usize> Bus<'a, N> {
         for frame in batch.frames() {
             match tx.try_send(frame) {
                 Ok(()) => {
-                    self.stats.record_tx(timing::frame_bits(frame));
+                    self.stats.record_tx(timing::unstuffed_bits(frame));
                     report.sent += 1;
                 }
                 Err(SendError::Full) => {
@@ -373,7 +373,7 @@ impl<'a, const N: usize> Bus<'a, N> {
 
     /// Routes a received frame to the node that claims it.
     pub fn dispatch(&self, frame: &CanFrame, now: Instant) -> Dispatch {
-        self.stats.record_rx(timing::frame_bits(frame));
+        self.stats.record_rx(timing::unstuffed_bits(frame));
         for (i, node) in self.nodes.iter().enumerate() {
             if node.matches_frame(frame) {
                 return match node.update_feedback(frame, now) {

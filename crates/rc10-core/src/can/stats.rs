@@ -5,6 +5,8 @@
 //! of 1 kHz frames on eight motors, so compare snapshots with wrapping subtraction as
 //! [`BusCounters::since`] does). Rates are computed from two snapshots one window apart.
 
+#[cfg(doc)]
+use super::timing;
 use crate::time::{Duration, Instant, micros_to_s};
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
@@ -130,7 +132,8 @@ impl BusStats {
 pub struct BusCounters {
     /// Frames received (all, matched or not).
     pub rx_frames: u32,
-    /// Bits of received frames, stuffing included.
+    /// Bits of received frames without stuff bits ([`timing::unstuffed_bits`]: constant
+    /// time, cheap enough for every frame on the MCU; stuffing adds up to 20 % more).
     pub rx_bits: u32,
     /// Received frames no registered device claimed.
     pub rx_unmatched: u32,
@@ -142,7 +145,7 @@ pub struct BusCounters {
     pub bus_errors: u32,
     /// Frames queued for transmission.
     pub tx_frames: u32,
-    /// Bits of queued frames, stuffing included.
+    /// Bits of queued frames without stuff bits (see `rx_bits`).
     pub tx_bits: u32,
     /// Frames not queued because the TX buffers were full.
     pub tx_full: u32,
@@ -211,7 +214,8 @@ pub struct BusRates {
     pub tx_frames_per_s: f32,
     /// Frames dropped on the TX side per second.
     pub tx_dropped_per_s: f32,
-    /// Share of the bus's bit time used by the frames this node saw and sent, in percent.
+    /// Share of the bus's bit time used by the frames this node saw and sent, in percent,
+    /// counted without stuff bits: the true load is up to a fifth higher.
     pub load_percent: f32,
 }
 

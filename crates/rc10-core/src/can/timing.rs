@@ -52,34 +52,31 @@ pub fn worst_case_bits(extended: bool, data_len: usize) -> u32 {
 /// assert!(bits > 111 && bits <= 135); // zeros stuff heavily
 /// ```
 pub fn frame_bits(frame: &CanFrame) -> u32 {
-    let mut w = StuffCounter::new();
-    w.push(false); // SOF
+    // The whole stuffed region (at most 103 bits + 15 CRC bits) as one MSB-first bit string.
+    let mut bits = BitString::default();
+    bits.push(0, 1); // SOF
     match frame.id() {
         Id::Standard(id) => {
-            w.push_bits(u32::from(id.as_raw()), 11);
-            w.push(frame.is_remote()); // RTR
-            w.push(false); // IDE
-            w.push(false); // r0
+            bits.push(u32::from(id.as_raw()), 11);
+            bits.push(u32::from(frame.is_remote()), 1); // RTR
+            bits.push(0, 2); // IDE, r0
         }
         Id::Extended(id) => {
             let raw = id.as_raw();
-            w.push_bits(raw >> 18, 11);
-            w.push(true); // SRR
-            w.push(true); // IDE
-            w.push_bits(raw & 0x3_FFFF, 18);
-            w.push(frame.is_remote()); // RTR
-            w.push(false); // r1
-            w.push(false); // r0
+            bits.push(raw >> 18, 11);
+            bits.push(0b11, 2); // SRR, IDE
+            bits.push(raw & 0x3_FFFF, 18);
+            bits.push(u32::from(frame.is_remote()), 1); // RTR
+            bits.push(0, 2); // r1, r0
         }
     }
-    w.push_bits(frame.dlc() as u32, 4);
+    bits.push(frame.dlc() as u32, 4);
     for &byte in frame.data() {
-        w.push_bits(u32::from(byte), 8);
+        bits.push(u32::from(byte), 8);
     }
-    let crc = w.crc;
-    w.crc_done = true; // the CRC field is stuffed but not part of its own checksum
-    w.push_bits(u32::from(crc), 15);
-    w.bits + UNSTUFFED_TAIL_BITS
+    let crc = bits.crc15();
+    bits.push(u32::from(crc), 15);
+    bits.len + bits.stuff_bits() + UNSTUFFED_TAIL_BITS
 }
 
 /// Time a frame occupies the bus at `bitrate_bps`, in whole microseconds (rounded up).
@@ -89,61 +86,194 @@ pub fn frame_time_us(frame: &CanFrame, bitrate_bps: u32) -> u32 {
     (bits * 1_000_000).div_ceil(rate) as u32
 }
 
-/// Counts bits including stuff bits while computing the CAN CRC-15 over the stuffed region.
-struct StuffCounter {
-    bits: u32,
-    run_value: bool,
-    run_len: u32,
-    crc: u16,
-    crc_done: bool,
+/// Up to 128 bits, MSB-first: bit `i` of the frame is bit `127 - i` of `bits`.
+#[derive(Default)]
+struct BitString {
+    bits: u128,
+    len: u32,
 }
 
-impl StuffCounter {
-    const fn new() -> Self {
-        Self {
-            bits: 0,
-            run_value: false,
-            run_len: 0,
-            crc: 0,
-            crc_done: false,
-        }
+impl BitString {
+    fn push(&mut self, value: u32, count: u32) {
+        let v = u128::from(value) & ((1u128 << count) - 1);
+        self.bits |= v << (128 - self.len - count);
+        self.len += count;
     }
 
-    fn push_bits(&mut self, value: u32, count: u32) {
-        for i in (0..count).rev() {
-            self.push((value >> i) & 1 == 1);
-        }
+    /// The byte starting at bit `at` (bits past the end read as 0).
+    fn byte_at(&self, at: u32) -> u8 {
+        (self.bits << at >> 120) as u8
     }
 
-    fn push(&mut self, bit: bool) {
-        if !self.crc_done {
-            // CRC-15/CAN, polynomial 0x4599, over SOF..data (destuffed bits).
-            let feedback = bit ^ ((self.crc >> 14) & 1 == 1);
-            self.crc = (self.crc << 1) & 0x7FFF;
-            if feedback {
-                self.crc ^= 0x4599;
+    /// CRC-15/CAN (polynomial 0x4599, initial 0) of all bits pushed so far.
+    fn crc15(&self) -> u16 {
+        let mut crc = 0u16;
+        let mut at = 0;
+        while at + 8 <= self.len {
+            let index = usize::from(((crc >> 7) as u8) ^ self.byte_at(at));
+            let entry = CRC15_TABLE.get(index).copied().unwrap_or(0); // index < 256 always
+            crc = ((crc << 8) ^ entry) & 0x7FFF;
+            at += 8;
+        }
+        while at < self.len {
+            crc = crc15_bit(crc, (self.bits >> (127 - at)) & 1 == 1);
+            at += 1;
+        }
+        crc
+    }
+
+    /// Stuff bits the transmitter inserts into these bits.
+    fn stuff_bits(&self) -> u32 {
+        let mut state = STUFF_START;
+        let mut stuffed = 0;
+        let mut at = 0;
+        while at + 8 <= self.len {
+            // state < 16 and byte < 256 always.
+            let entry = STUFF_TABLE
+                .get(usize::from(state))
+                .and_then(|row| row.get(usize::from(self.byte_at(at))))
+                .copied()
+                .unwrap_or(0);
+            state = entry & 0x0F;
+            stuffed += u32::from(entry >> 4);
+            at += 8;
+        }
+        while at < self.len {
+            let (next, stuff) = stuff_bit(state, (self.bits >> (127 - at)) & 1 == 1);
+            state = next;
+            stuffed += u32::from(stuff);
+            at += 1;
+        }
+        stuffed
+    }
+}
+
+/// One bit of CRC-15/CAN.
+const fn crc15_bit(crc: u16, bit: bool) -> u16 {
+    let feedback = bit ^ ((crc >> 14) & 1 == 1);
+    let shifted = (crc << 1) & 0x7FFF;
+    if feedback { shifted ^ 0x4599 } else { shifted }
+}
+
+/// CRC-15/CAN of each byte fed MSB-first into a register holding that byte in its top bits.
+// Built at compile time: an out-of-bounds index would fail the build, not panic at run time.
+#[allow(clippy::indexing_slicing)]
+const CRC15_TABLE: [u16; 256] = {
+    let mut table = [0u16; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut crc = (i as u16) << 7;
+        let mut k = 0;
+        while k < 8 {
+            // The byte already sits in the register: shift through eight zero bits.
+            crc = crc15_bit(crc & 0x7FFF, false);
+            k += 1;
+        }
+        table[i] = crc;
+        i += 1;
+    }
+    table
+};
+
+/// Stuffing state: `run value << 3 | run length (1–5)`; `STUFF_START` before the first bit.
+const STUFF_START: u8 = 0;
+
+/// Emits one bit; returns the new state and whether a stuff bit followed it.
+const fn stuff_bit(state: u8, bit: bool) -> (u8, bool) {
+    let run_value = state >> 3 == 1;
+    let run_len = state & 0x7;
+    let len = if run_len > 0 && bit == run_value {
+        run_len + 1
+    } else {
+        1
+    };
+    if len == 5 {
+        // The stuff bit (opposite value) starts a new run of length 1.
+        (((!bit) as u8) << 3 | 1, true)
+    } else {
+        ((bit as u8) << 3 | len, false)
+    }
+}
+
+/// For each state and byte: `stuff bits << 4 | new state`.
+// Built at compile time: an out-of-bounds index would fail the build, not panic at run time.
+#[allow(clippy::indexing_slicing)]
+const STUFF_TABLE: [[u8; 256]; 16] = {
+    let mut table = [[0u8; 256]; 16];
+    let mut state = 0;
+    while state < 16 {
+        let mut byte = 0;
+        while byte < 256 {
+            let mut s = state as u8;
+            let mut stuffed = 0u8;
+            let mut k = 0;
+            while k < 8 {
+                let (next, stuff) = stuff_bit(s, (byte >> (7 - k)) & 1 == 1);
+                s = next;
+                stuffed += stuff as u8;
+                k += 1;
             }
+            table[state][byte] = stuffed << 4 | s;
+            byte += 1;
         }
-        self.emit(bit);
-        if self.run_len == 5 {
-            self.emit(!bit); // stuff bit
-        }
+        state += 1;
     }
-
-    fn emit(&mut self, bit: bool) {
-        self.bits += 1;
-        if self.run_len > 0 && bit == self.run_value {
-            self.run_len += 1;
-        } else {
-            self.run_value = bit;
-            self.run_len = 1;
-        }
-    }
-}
+    table
+};
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// Bit-by-bit reference: CRC and stuffing computed one bit at a time.
+    fn reference_bits(frame: &CanFrame) -> u32 {
+        fn push_to(stream: &mut Vec<bool>, v: u32, n: u32) {
+            (0..n).rev().for_each(|i| stream.push((v >> i) & 1 == 1));
+        }
+        let mut stream: Vec<bool> = Vec::new();
+        let mut push = |v: u32, n: u32| push_to(&mut stream, v, n);
+        push(0, 1);
+        match frame.id() {
+            Id::Standard(id) => {
+                push(u32::from(id.as_raw()), 11);
+                push(u32::from(frame.is_remote()), 1);
+                push(0, 2);
+            }
+            Id::Extended(id) => {
+                push(id.as_raw() >> 18, 11);
+                push(3, 2);
+                push(id.as_raw() & 0x3_FFFF, 18);
+                push(u32::from(frame.is_remote()), 1);
+                push(0, 2);
+            }
+        }
+        push(frame.dlc() as u32, 4);
+        frame.data().iter().for_each(|b| push(u32::from(*b), 8));
+        let crc = stream.iter().fold(0u16, |c, b| crc15_bit(c, *b));
+        push_to(&mut stream, u32::from(crc), 15);
+        let (mut state, mut stuffed) = (STUFF_START, 0);
+        for b in &stream {
+            let (s, x) = stuff_bit(state, *b);
+            state = s;
+            stuffed += u32::from(x);
+        }
+        stream.len() as u32 + stuffed + 13
+    }
+
+    proptest! {
+        #[test]
+        fn table_driven_bits_equal_bit_by_bit_reference(
+            id in 0u32..0x2000_0000, extended: bool, data in proptest::collection::vec(any::<u8>(), 0..=8),
+        ) {
+            let f = if extended {
+                CanFrame::extended(id, &data).unwrap()
+            } else {
+                CanFrame::standard((id & 0x7FF) as u16, &data).unwrap()
+            };
+            prop_assert_eq!(frame_bits(&f), reference_bits(&f));
+        }
+    }
 
     #[test]
     fn worst_case_matches_spec_figures() {

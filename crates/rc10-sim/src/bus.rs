@@ -1,0 +1,254 @@
+//! A simulated classic CAN bus in virtual time: frame durations from the exact bit count
+//! (stuffing included) at the configured bitrate, arbitration by ID among all nodes with a
+//! frame waiting, and bounded TX queues (the STM32G4's 3 TX buffers on the controller side).
+//!
+//! The bus does not run by itself: the world loop asks it for the next moment something
+//! happens ([`SimBus::busy_until`]), completes frames ([`SimBus::complete`]) and starts the next
+//! one ([`SimBus::start_next`]).
+
+use rc10_core::can::{CanFrame, CanTransmit, Id, SendError, timing};
+use std::collections::VecDeque;
+
+/// Which node a frame came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sender {
+    /// The controller running rc10 (the STM32).
+    Mcu,
+    /// Device `n` (an ESC), in the order devices were added.
+    Device(usize),
+}
+
+/// Bus parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SimBusConfig {
+    /// Bitrate in bits per second (1 Mbit/s for DJI motors).
+    pub bitrate_bps: u32,
+    /// TX buffers of the controller (3 on an STM32G4 FDCAN).
+    pub mcu_tx_depth: usize,
+    /// TX buffers of each device.
+    pub device_tx_depth: usize,
+}
+
+impl Default for SimBusConfig {
+    fn default() -> Self {
+        Self {
+            bitrate_bps: 1_000_000,
+            mcu_tx_depth: 3,
+            device_tx_depth: 3,
+        }
+    }
+}
+
+/// Counters of the simulated bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SimBusStats {
+    /// Frames that completed on the wire.
+    pub frames: u64,
+    /// Microseconds the bus was busy.
+    pub busy_us: u64,
+    /// Controller frames refused because its TX buffers were full.
+    pub mcu_tx_full: u64,
+    /// Device frames dropped because the device's TX buffers were full.
+    pub device_tx_dropped: u64,
+    /// Frames the fault injector removed from the wire.
+    pub lost: u64,
+}
+
+/// The simulated bus.
+#[derive(Debug)]
+pub struct SimBus {
+    config: SimBusConfig,
+    mcu_tx: VecDeque<CanFrame>,
+    device_tx: Vec<VecDeque<CanFrame>>,
+    on_wire: Option<(Sender, CanFrame, u64)>,
+    stats: SimBusStats,
+}
+
+impl SimBus {
+    /// An idle bus with no devices.
+    pub fn new(config: SimBusConfig) -> Self {
+        Self {
+            config,
+            mcu_tx: VecDeque::new(),
+            device_tx: Vec::new(),
+            on_wire: None,
+            stats: SimBusStats::default(),
+        }
+    }
+
+    /// Adds a device node; returns its index for [`Sender::Device`].
+    pub fn add_device(&mut self) -> usize {
+        self.device_tx.push(VecDeque::new());
+        self.device_tx.len() - 1
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SimBusConfig {
+        &self.config
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> SimBusStats {
+        self.stats
+    }
+
+    /// The controller's transmit port, for `rc10_core::bus::Bus::transmit`.
+    pub fn mcu_port(&mut self) -> McuPort<'_> {
+        McuPort { bus: self }
+    }
+
+    /// Queues a frame from device `index`; dropped (and counted) if its buffers are full.
+    pub fn device_send(&mut self, index: usize, frame: CanFrame) {
+        let depth = self.config.device_tx_depth;
+        match self.device_tx.get_mut(index) {
+            Some(q) if q.len() < depth => q.push_back(frame),
+            _ => self.stats.device_tx_dropped += 1,
+        }
+    }
+
+    /// When the frame on the wire ends, if one is.
+    pub fn busy_until(&self) -> Option<u64> {
+        self.on_wire.map(|(_, _, end)| end)
+    }
+
+    /// Takes the frame that ends at `now_us`, if any.
+    pub fn complete(&mut self, now_us: u64) -> Option<(Sender, CanFrame)> {
+        match self.on_wire {
+            Some((sender, frame, end)) if end <= now_us => {
+                self.on_wire = None;
+                self.stats.frames += 1;
+                Some((sender, frame))
+            }
+            _ => None,
+        }
+    }
+
+    /// Counts a frame that a fault removed from the wire.
+    pub fn record_lost(&mut self) {
+        self.stats.lost += 1;
+    }
+
+    /// If the bus is idle, starts the waiting frame that wins arbitration (lowest ID; a
+    /// standard ID beats an extended one with the same first 11 bits).
+    pub fn start_next(&mut self, now_us: u64) {
+        if self.on_wire.is_some() {
+            return;
+        }
+        let mut best: Option<(u64, Sender)> = None;
+        let candidates = self
+            .mcu_tx
+            .front()
+            .map(|f| (Sender::Mcu, f))
+            .into_iter()
+            .chain(
+                self.device_tx
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, q)| q.front().map(|f| (Sender::Device(i), f))),
+            );
+        for (sender, frame) in candidates {
+            let key = arbitration_key(frame);
+            if best.is_none_or(|(k, _)| key < k) {
+                best = Some((key, sender));
+            }
+        }
+        let Some((_, sender)) = best else { return };
+        let frame = match sender {
+            Sender::Mcu => self.mcu_tx.pop_front(),
+            Sender::Device(i) => self.device_tx.get_mut(i).and_then(VecDeque::pop_front),
+        };
+        if let Some(frame) = frame {
+            let duration = u64::from(timing::frame_time_us(&frame, self.config.bitrate_bps));
+            self.stats.busy_us += duration;
+            self.on_wire = Some((sender, frame, now_us + duration));
+        }
+    }
+}
+
+/// The arbitration field as a number: lower wins. Standard: ID, RTR, IDE=0. Extended: base ID,
+/// SRR=1, IDE=1, ID extension, RTR.
+fn arbitration_key(frame: &CanFrame) -> u64 {
+    let rtr = u64::from(frame.is_remote());
+    match frame.id() {
+        Id::Standard(id) => (u64::from(id.as_raw()) << 21) | (rtr << 20),
+        Id::Extended(id) => {
+            let raw = u64::from(id.as_raw());
+            ((raw >> 18) << 21) | (1 << 20) | (1 << 19) | ((raw & 0x3_FFFF) << 1) | rtr
+        }
+    }
+}
+
+/// The controller's TX buffers, as rc10's scheduler sees them.
+#[derive(Debug)]
+pub struct McuPort<'a> {
+    bus: &'a mut SimBus,
+}
+
+impl CanTransmit for McuPort<'_> {
+    fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
+        if self.bus.mcu_tx.len() >= self.bus.config.mcu_tx_depth {
+            self.bus.stats.mcu_tx_full += 1;
+            return Err(SendError::Full);
+        }
+        self.bus.mcu_tx.push_back(*frame);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn std_frame(id: u16) -> CanFrame {
+        CanFrame::standard(id, &[0x55; 8]).unwrap()
+    }
+
+    #[test]
+    fn lowest_id_wins_and_frame_lasts_its_bit_time() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        let esc = bus.add_device();
+        bus.device_send(esc, std_frame(0x201));
+        bus.mcu_port().try_send(&std_frame(0x200)).unwrap();
+        bus.start_next(100);
+        let end = bus.busy_until().unwrap();
+        assert_eq!(end, 100 + u64::from(timing::frame_bits(&std_frame(0x200))));
+        assert_eq!(bus.complete(end), Some((Sender::Mcu, std_frame(0x200))));
+        bus.start_next(end);
+        let end2 = bus.busy_until().unwrap();
+        assert_eq!(
+            bus.complete(end2),
+            Some((Sender::Device(0), std_frame(0x201)))
+        );
+    }
+
+    #[test]
+    fn command_0x2ff_loses_to_feedback_0x205() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        let esc = bus.add_device();
+        bus.mcu_port().try_send(&std_frame(0x2FF)).unwrap();
+        bus.device_send(esc, std_frame(0x205));
+        bus.start_next(0);
+        let end = bus.busy_until().unwrap();
+        assert_eq!(bus.complete(end).unwrap().0, Sender::Device(0));
+    }
+
+    #[test]
+    fn standard_beats_extended_with_same_base() {
+        let s = CanFrame::standard(0x100, &[]).unwrap();
+        let e = CanFrame::extended(0x100 << 18, &[]).unwrap();
+        assert!(arbitration_key(&s) < arbitration_key(&e));
+        let e_low = CanFrame::extended(0x0000_0901, &[]).unwrap(); // base 0
+        assert!(arbitration_key(&e_low) < arbitration_key(&s));
+    }
+
+    #[test]
+    fn mcu_tx_depth_is_three() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        let mut port = bus.mcu_port();
+        for _ in 0..3 {
+            port.try_send(&std_frame(0x200)).unwrap();
+        }
+        assert_eq!(port.try_send(&std_frame(0x200)), Err(SendError::Full));
+        assert_eq!(bus.stats().mcu_tx_full, 1);
+    }
+}

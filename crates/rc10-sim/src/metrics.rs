@@ -1,0 +1,172 @@
+//! Step-response figures (rise time, overshoot, settling, steady-state error, IAE, peak
+//! current) and the current-limited minimum rise time a step could possibly have.
+
+use crate::plant::{DjiEsc, Load, MotorParams};
+
+/// Figures of one step response, computed on the physical output (not the reported value).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepMetrics {
+    /// Value before the step.
+    pub initial: f64,
+    /// Target after the step.
+    pub target: f64,
+    /// Time from 10 % to 90 % of the step, seconds (`None` if 90 % was never reached).
+    pub rise_time_s: Option<f64>,
+    /// Largest excursion beyond the target, percent of the step size.
+    pub overshoot_percent: f64,
+    /// Time after the step until the response stays within ±2 % of the step size, seconds
+    /// (`None` if it is outside the band at the end).
+    pub settling_time_s: Option<f64>,
+    /// Mean absolute error over the last 10 % of the window, in the signal's unit.
+    pub steady_state_error: f64,
+    /// Integral of the absolute error, signal unit × seconds.
+    pub iae: f64,
+    /// Largest absolute motor current, amps.
+    pub peak_current_amps: f64,
+}
+
+/// Computes [`StepMetrics`] for samples `t_s`, `y` (and `current_amps`) from the step at
+/// `t0_s` (value `y0`) towards `target`. Samples before `t0_s` are ignored.
+pub fn step_metrics(
+    t_s: &[f64],
+    y: &[f64],
+    current_amps: &[f64],
+    t0_s: f64,
+    y0: f64,
+    target: f64,
+) -> StepMetrics {
+    let delta = target - y0;
+    let size = delta.abs().max(f64::EPSILON);
+    let dir = delta.signum();
+    let samples: Vec<(f64, f64, f64)> = t_s
+        .iter()
+        .zip(y)
+        .zip(current_amps)
+        .filter(|((t, _), _)| **t >= t0_s)
+        .map(|((t, y), i)| (*t, *y, *i))
+        .collect();
+    let progress = |v: f64| (v - y0) * dir / size;
+    let first_reaching = |fraction: f64| {
+        samples
+            .iter()
+            .find(|(_, v, _)| progress(*v) >= fraction)
+            .map(|(t, _, _)| *t)
+    };
+    let rise_time_s = match (first_reaching(0.1), first_reaching(0.9)) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    let overshoot_percent = samples
+        .iter()
+        .map(|(_, v, _)| (progress(*v) - 1.0) * 100.0)
+        .fold(0.0f64, f64::max);
+    let band = 0.02 * size;
+    let last_outside = samples
+        .iter()
+        .rev()
+        .find(|(_, v, _)| (v - target).abs() > band)
+        .map(|(t, _, _)| *t);
+    let settling_time_s = match (last_outside, samples.last()) {
+        (None, _) => Some(0.0),
+        (Some(t), Some((t_end, _, _))) if t < *t_end => Some(t - t0_s),
+        _ => None,
+    };
+    let tail_from = samples.len() - samples.len() / 10;
+    let tail = samples.get(tail_from..).unwrap_or(&[]);
+    let steady_state_error = if tail.is_empty() {
+        f64::NAN
+    } else {
+        tail.iter().map(|(_, v, _)| (v - target).abs()).sum::<f64>() / tail.len() as f64
+    };
+    let iae = samples
+        .iter()
+        .zip(samples.iter().skip(1))
+        .map(|((t0, v0, _), (t1, _, _))| (t1 - t0) * (v0 - target).abs())
+        .sum();
+    let peak_current_amps = samples.iter().map(|(_, _, i)| i.abs()).fold(0.0, f64::max);
+    StepMetrics {
+        initial: y0,
+        target,
+        rise_time_s,
+        overshoot_percent,
+        settling_time_s,
+        steady_state_error,
+        iae,
+        peak_current_amps,
+    }
+}
+
+/// The 10–90 % rise time of a speed step from 0 to `target_rpm` when the ESC is commanded its
+/// full current from the first instant (bang-bang): no controller can rise faster on this
+/// plant. `None` if full current never reaches 90 % of the target.
+pub fn min_speed_rise_time_s(params: MotorParams, load: Load, target_rpm: f64) -> Option<f64> {
+    let mut esc = DjiEsc::new(params, 1, load, 0);
+    let full = if target_rpm >= 0.0 {
+        i16::MAX
+    } else {
+        i16::MIN + 1
+    };
+    esc.set_command_raw(full);
+    let dt = 1e-5;
+    let (mut t10, mut t90) = (None, None);
+    for k in 0..200_000u64 {
+        let t = k as f64 * dt;
+        let n = esc.speed_rpm() / target_rpm;
+        if t10.is_none() && n >= 0.1 {
+            t10 = Some(t);
+        }
+        if n >= 0.9 {
+            t90 = Some(t);
+            break;
+        }
+        esc.step(k * 10, dt);
+    }
+    Some(t90? - t10?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn first_order_step_figures_match_closed_form() {
+        // y = 1 - e^{-t/τ}, τ = 0.1 s: rise 10–90 % = τ ln 9 = 0.2197 s; 2 % settling = τ ln 50
+        // = 0.391 s; no overshoot; IAE = τ = 0.1.
+        let tau = 0.1;
+        let t: Vec<f64> = (0..20_000).map(|k| k as f64 * 1e-4).collect();
+        let y: Vec<f64> = t.iter().map(|t| 1.0 - (-t / tau).exp()).collect();
+        let i = vec![0.5; t.len()];
+        let m = step_metrics(&t, &y, &i, 0.0, 0.0, 1.0);
+        assert!((m.rise_time_s.unwrap() - 0.2197).abs() < 1e-3);
+        assert!((m.settling_time_s.unwrap() - 0.391).abs() < 1e-3);
+        assert_eq!(m.overshoot_percent, 0.0);
+        assert!((m.iae - 0.1).abs() < 1e-3);
+        assert_eq!(m.peak_current_amps, 0.5);
+        assert!(m.steady_state_error < 1e-6);
+    }
+
+    #[test]
+    fn overshoot_and_negative_steps() {
+        let t = [0.0, 0.1, 0.2, 0.3, 0.4];
+        let y = [0.0, -0.5, -1.2, -1.0, -1.0];
+        let m = step_metrics(&t, &y, &[0.0; 5], 0.0, 0.0, -1.0);
+        assert!((m.overshoot_percent - 20.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn never_reaching_target_reports_none() {
+        let t = [0.0, 0.1, 0.2];
+        let y = [0.0, 0.2, 0.3];
+        let m = step_metrics(&t, &y, &[0.0; 3], 0.0, 0.0, 1.0);
+        assert_eq!(m.rise_time_s, None);
+        assert_eq!(m.settling_time_s, None);
+    }
+
+    #[test]
+    fn m3508_bang_bang_rise_time_matches_hand_estimate() {
+        // 0 → 300 rpm: current-limited at 5 N·m up to ≈122 rpm, then the torque–speed line
+        // (τ = 49 ms) takes over; 10 % ≈ 4 ms, 90 % ≈ 43 ms → ≈ 39 ms.
+        let t = min_speed_rise_time_s(MotorParams::m3508(), Load::default(), 300.0).unwrap();
+        assert!(t > 0.033 && t < 0.045, "t = {t}");
+    }
+}

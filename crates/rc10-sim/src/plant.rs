@@ -1,0 +1,504 @@
+//! Physical models of DJI ESC + motor pairs at the CAN-frame level: they read command frames,
+//! integrate rigid-body dynamics, and send feedback frames as the real ESC does (1 kHz,
+//! quantised angle, integer rpm, temperature).
+//!
+//! All quantities are SI at the **output shaft** unless named `rotor`. Parameters come from
+//! SPEC.md's protocol facts (DJI user guides); "derived" marks values computed from them.
+//!
+//! Current-controlled ESCs (C620, C610, GM6020 current mode) regulate the commanded current
+//! through a first-order lag, but can only push as much as the supply voltage allows against
+//! back-EMF: the motor's published torque–speed line `T ≤ (n_no_load − n) / gradient` caps the
+//! current in the direction of motion. The GM6020 in voltage mode is a DC-motor model
+//! `L di/dt = V − R i − ke ω` whose `R` is derived from the published speed/torque gradient.
+
+use rc10_core::can::CanFrame;
+use rc10_core::motor::dji::DjiModel;
+use std::f64::consts::TAU;
+
+/// How the ESC turns its command into current.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drive {
+    /// The ESC runs a current loop (C620, C610, GM6020 current mode).
+    CurrentLoop {
+        /// Amps per raw command count.
+        amps_per_raw: f64,
+        /// The ESC's current limit in amps.
+        limit_amps: f64,
+        /// Time constant of the current loop in seconds.
+        tau_s: f64,
+        /// No-load output speed in rpm held by the ESC at the rated supply.
+        no_load_rpm: f64,
+        /// Output speed drop per N·m of load, rpm/(N·m).
+        gradient_rpm_per_nm: f64,
+    },
+    /// The command is a voltage (GM6020 voltage mode).
+    Voltage {
+        /// Volts per raw command count.
+        volts_per_raw: f64,
+        /// Largest raw command the motor accepts.
+        raw_limit: f64,
+        /// Effective winding resistance in ohms.
+        resistance_ohm: f64,
+        /// Winding inductance in henries.
+        inductance_h: f64,
+        /// Back-EMF constant, volts per output rad/s.
+        ke_v_s_per_rad: f64,
+    },
+}
+
+/// Parameters of one ESC + motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorParams {
+    /// Which DJI model (IDs, frame layout).
+    pub model: DjiModel,
+    /// Rotor turns per output turn.
+    pub gear_ratio: f64,
+    /// Torque per amp at the output shaft, including gearbox efficiency, N·m/A.
+    pub torque_constant_nm_per_a: f64,
+    /// Inertia of rotor and gearbox reflected to the output, kg·m².
+    pub inertia_kg_m2: f64,
+    /// Viscous friction, N·m per rad/s.
+    pub viscous_nm_s_per_rad: f64,
+    /// Coulomb friction, N·m.
+    pub coulomb_nm: f64,
+    /// How the ESC drives the motor.
+    pub drive: Drive,
+    /// Raw command full scale: the raw value for full current/voltage, for feedback scaling.
+    pub feedback_amps_per_raw: f64,
+    /// Winding resistance for copper losses, ohms (per phase).
+    pub phase_resistance_ohm: f64,
+    /// Thermal resistance winding → ambient, K/W (derived).
+    pub thermal_resistance_k_per_w: f64,
+    /// Thermal capacity of the winding, J/K (derived).
+    pub thermal_capacity_j_per_k: f64,
+    /// Ambient temperature, °C.
+    pub ambient_c: f64,
+    /// Whether the ESC reports temperature (not the C610).
+    pub reports_temperature: bool,
+}
+
+impl MotorParams {
+    /// C620 + M3508 (DJI M3508 P19 / C620 user guides).
+    pub fn m3508() -> Self {
+        Self {
+            model: DjiModel::M3508,
+            gear_ratio: 3591.0 / 187.0,
+            // 0.3 N·m/A at the output; the published torque curve saturates near 5 N·m at
+            // 20 A, i.e. ≈0.25 N·m/A effective with gearbox losses (SPEC.md).
+            torque_constant_nm_per_a: 0.25,
+            // Derived from the 49 ms mechanical time constant and 72 rpm/(N·m):
+            // J = τ / (72 · 2π/60) = 6.5e-3 kg·m² (low confidence, SPEC.md).
+            inertia_kg_m2: 6.5e-3,
+            viscous_nm_s_per_rad: 2e-3,
+            coulomb_nm: 0.03,
+            drive: Drive::CurrentLoop {
+                amps_per_raw: 20.0 / 16384.0,
+                limit_amps: 20.0,
+                // L/R = 0.097 mH / 0.194 Ω = 0.5 ms.
+                tau_s: 0.5e-3,
+                no_load_rpm: 482.0,
+                gradient_rpm_per_nm: 72.0,
+            },
+            feedback_amps_per_raw: 20.0 / 16384.0,
+            phase_resistance_ohm: 0.194,
+            // Derived: 10 A continuous (rated) → 1.5 · 10² · 0.194 = 29 W holds the winding at
+            // 125 °C from 25 °C: 3.4 K/W; a 10-minute thermal time constant: 176 J/K.
+            thermal_resistance_k_per_w: 3.4,
+            thermal_capacity_j_per_k: 176.0,
+            ambient_c: 25.0,
+            reports_temperature: true,
+        }
+    }
+
+    /// C610 + M2006 (DJI M2006 P36 / C610 user guides).
+    pub fn m2006() -> Self {
+        Self {
+            model: DjiModel::M2006,
+            gear_ratio: 36.0,
+            torque_constant_nm_per_a: 0.18,
+            // Derived: 52.78 ms / (110 rpm/(N·m) · 2π/60) = 4.6e-3 kg·m².
+            inertia_kg_m2: 4.6e-3,
+            viscous_nm_s_per_rad: 1e-3,
+            coulomb_nm: 0.02,
+            drive: Drive::CurrentLoop {
+                amps_per_raw: 10.0 / 10000.0,
+                limit_amps: 10.0,
+                tau_s: 0.5e-3,
+                no_load_rpm: 500.0,
+                gradient_rpm_per_nm: 110.0,
+            },
+            feedback_amps_per_raw: 10.0 / 10000.0,
+            phase_resistance_ohm: 0.461,
+            thermal_resistance_k_per_w: 8.0,
+            thermal_capacity_j_per_k: 60.0,
+            ambient_c: 25.0,
+            reports_temperature: false,
+        }
+    }
+
+    /// GM6020 in voltage mode (DJI GM6020 user guide, 2018).
+    pub fn gm6020_voltage() -> Self {
+        // ke from the no-load speed: 24 V / (320 rpm · 2π/60) = 0.716 V·s/rad.
+        let ke = 24.0 / (320.0 * TAU / 60.0);
+        Self {
+            model: DjiModel::Gm6020Voltage,
+            gear_ratio: 1.0,
+            torque_constant_nm_per_a: 0.741,
+            // Derived: 3 ms / (156 rpm/(N·m) · 2π/60) = 1.8e-4 kg·m².
+            inertia_kg_m2: 1.8e-4,
+            viscous_nm_s_per_rad: 1e-4,
+            coulomb_nm: 0.01,
+            drive: Drive::Voltage {
+                // 30000 ↔ 24 V (2018 manual full scale at the rated supply).
+                volts_per_raw: 24.0 / 30000.0,
+                raw_limit: 25000.0,
+                // Derived from the gradient: R = (156 · 2π/60) · ke · kt = 8.7 Ω effective.
+                resistance_ohm: 156.0 * TAU / 60.0 * ke * 0.741,
+                inductance_h: 5.78e-3,
+                ke_v_s_per_rad: ke,
+            },
+            feedback_amps_per_raw: 3.0 / 16384.0,
+            phase_resistance_ohm: 1.8,
+            thermal_resistance_k_per_w: 6.0,
+            thermal_capacity_j_per_k: 100.0,
+            ambient_c: 25.0,
+            reports_temperature: true,
+        }
+    }
+
+    /// The parameters for `model`.
+    pub fn for_model(model: DjiModel) -> Self {
+        match model {
+            DjiModel::M3508 => Self::m3508(),
+            DjiModel::M2006 => Self::m2006(),
+            DjiModel::Gm6020Voltage => Self::gm6020_voltage(),
+            DjiModel::Gm6020Current => {
+                let mut p = Self::gm6020_voltage();
+                p.model = DjiModel::Gm6020Current;
+                p.drive = Drive::CurrentLoop {
+                    amps_per_raw: 3.0 / 16384.0,
+                    limit_amps: 3.0,
+                    tau_s: 0.67e-3,
+                    no_load_rpm: 320.0,
+                    gradient_rpm_per_nm: 156.0,
+                };
+                p
+            }
+        }
+    }
+}
+
+/// What the motor drives besides itself.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Load {
+    /// Extra inertia at the output, kg·m².
+    pub inertia_kg_m2: f64,
+    /// Constant opposing torque, N·m (positive opposes positive rotation).
+    pub torque_nm: f64,
+    /// A torque step: `(time in µs, torque in N·m)` replacing `torque_nm` from then on.
+    pub step: Option<(u64, f64)>,
+}
+
+/// One ESC + motor on the simulated bus.
+#[derive(Debug, Clone)]
+pub struct DjiEsc {
+    params: MotorParams,
+    esc_id: u8,
+    load: Load,
+    /// Output speed, rad/s.
+    omega: f64,
+    /// Rotor angle, rad (continuous).
+    rotor_angle: f64,
+    current: f64,
+    command_raw: f64,
+    temperature: f64,
+    powered: bool,
+    locked: bool,
+    feedback_phase_us: u64,
+    /// `(dt, 1 − e^(−dt/τ))` of the electrical lag for the last `dt` (steps are constant).
+    lag: (f64, f64),
+}
+
+impl DjiEsc {
+    /// An ESC with id `esc_id` at rest, sending feedback `feedback_phase_us` into every ms.
+    pub fn new(params: MotorParams, esc_id: u8, load: Load, feedback_phase_us: u64) -> Self {
+        Self {
+            params,
+            esc_id,
+            load,
+            omega: 0.0,
+            rotor_angle: 0.0,
+            current: 0.0,
+            command_raw: 0.0,
+            temperature: params.ambient_c,
+            powered: true,
+            locked: false,
+            feedback_phase_us: feedback_phase_us % 1000,
+            lag: (0.0, 0.0),
+        }
+    }
+
+    /// The electrical lag's step factor for `dt_s` with time constant `tau_s`, cached.
+    fn lag_factor(&mut self, dt_s: f64, tau_s: f64) -> f64 {
+        if self.lag.0 != dt_s {
+            self.lag = (dt_s, 1.0 - (-dt_s / tau_s).exp());
+        }
+        self.lag.1
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &MotorParams {
+        &self.params
+    }
+
+    /// Output speed in rpm (the physical truth, not the reported value).
+    pub fn speed_rpm(&self) -> f64 {
+        self.omega * 60.0 / TAU
+    }
+
+    /// Output angle in degrees, continuous (physical truth).
+    pub fn total_angle_deg(&self) -> f64 {
+        self.rotor_angle / self.params.gear_ratio * 360.0 / TAU
+    }
+
+    /// Winding current in amps.
+    pub fn current_amps(&self) -> f64 {
+        self.current
+    }
+
+    /// Winding temperature in °C.
+    pub fn temperature_c(&self) -> f64 {
+        self.temperature
+    }
+
+    /// Cuts or restores the ESC's power (a referee power cut): unpowered, it sends nothing and
+    /// drives no current.
+    pub fn set_powered(&mut self, powered: bool) {
+        self.powered = powered;
+        if !powered {
+            self.command_raw = 0.0;
+        }
+    }
+
+    /// Locks or frees the rotor (a stall).
+    pub fn set_locked(&mut self, locked: bool) {
+        self.locked = locked;
+        if locked {
+            self.omega = 0.0;
+        }
+    }
+
+    /// Forces the winding temperature (over-temperature injection).
+    pub fn set_temperature_c(&mut self, celsius: f64) {
+        self.temperature = celsius;
+    }
+
+    /// Whether the ESC sends feedback at `now_us` (every ms at its own phase).
+    pub fn feedback_due(&self, now_us: u64) -> bool {
+        self.powered && now_us % 1000 == self.feedback_phase_us
+    }
+
+    /// The next time after `now_us` feedback is due.
+    pub fn next_feedback_us(&self, now_us: u64) -> u64 {
+        let base = now_us - now_us % 1000 + self.feedback_phase_us;
+        if base > now_us { base } else { base + 1000 }
+    }
+
+    /// Sets the raw command directly, as if a command frame had carried it (for analyses such
+    /// as the full-current run that defines the minimum rise time).
+    pub fn set_command_raw(&mut self, raw: i16) {
+        self.command_raw = f64::from(raw);
+    }
+
+    /// Reads its slot from a command frame on the bus.
+    pub fn on_frame(&mut self, frame: &CanFrame) {
+        if !self.powered || frame.is_extended() {
+            return;
+        }
+        let Some(slot) = self.params.model.command_slot(self.esc_id) else {
+            return;
+        };
+        if frame.raw_id() != u32::from(slot.id()) {
+            return;
+        }
+        if let Some(d) = frame.data8() {
+            let i = 2 * usize::from(slot.index());
+            if let Some(&[hi, lo]) = d.get(i..i + 2) {
+                self.command_raw = f64::from(i16::from_be_bytes([hi, lo]));
+            }
+        }
+    }
+
+    /// Integrates `dt_s` seconds at time `now_us`.
+    pub fn step(&mut self, now_us: u64, dt_s: f64) {
+        let p = self.params;
+        let load_torque = match self.load.step {
+            Some((t, torque)) if now_us >= t => torque,
+            _ => self.load.torque_nm,
+        };
+        let command = if self.powered { self.command_raw } else { 0.0 };
+        self.current = match p.drive {
+            Drive::CurrentLoop {
+                amps_per_raw,
+                limit_amps,
+                tau_s,
+                no_load_rpm,
+                gradient_rpm_per_nm,
+            } => {
+                let target = (command * amps_per_raw).clamp(-limit_amps, limit_amps);
+                let i = self.current + (target - self.current) * self.lag_factor(dt_s, tau_s);
+                // Voltage headroom: in the direction of motion the torque cannot exceed the
+                // torque–speed line.
+                let n = self.speed_rpm();
+                let headroom_nm = |dir: f64| (no_load_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
+                let max_pos = headroom_nm(1.0) / p.torque_constant_nm_per_a;
+                let max_neg = headroom_nm(-1.0) / p.torque_constant_nm_per_a;
+                i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
+            }
+            Drive::Voltage {
+                volts_per_raw,
+                raw_limit,
+                resistance_ohm,
+                inductance_h,
+                ke_v_s_per_rad,
+            } => {
+                let v = command.clamp(-raw_limit, raw_limit) * volts_per_raw;
+                let i_ss = (v - ke_v_s_per_rad * self.omega) / resistance_ohm;
+                let tau = inductance_h / resistance_ohm;
+                self.current + (i_ss - self.current) * self.lag_factor(dt_s, tau)
+            }
+        };
+        if !self.powered {
+            self.current = 0.0;
+        }
+        let inertia = p.inertia_kg_m2 + self.load.inertia_kg_m2;
+        let drive = p.torque_constant_nm_per_a * self.current - load_torque;
+        if self.locked {
+            self.omega = 0.0;
+        } else {
+            let viscous = p.viscous_nm_s_per_rad * self.omega;
+            let moving = self.omega.abs() > 1e-6;
+            let coulomb = if moving {
+                p.coulomb_nm * self.omega.signum()
+            } else {
+                // Static friction holds the shaft until the drive exceeds it.
+                drive.clamp(-p.coulomb_nm, p.coulomb_nm)
+            };
+            let accel = (drive - viscous - coulomb) / inertia;
+            let next = self.omega + accel * dt_s;
+            // Friction stops the shaft; it does not reverse it.
+            self.omega =
+                if moving && next.signum() != self.omega.signum() && drive.abs() <= p.coulomb_nm {
+                    0.0
+                } else {
+                    next
+                };
+        }
+        self.rotor_angle += self.omega * p.gear_ratio * dt_s;
+        // Copper losses heat the winding; it cools towards ambient.
+        let loss_w = 1.5 * self.current * self.current * p.phase_resistance_ohm;
+        let cooling_w = (self.temperature - p.ambient_c) / p.thermal_resistance_k_per_w;
+        self.temperature += (loss_w - cooling_w) / p.thermal_capacity_j_per_k * dt_s;
+    }
+
+    /// The feedback frame the ESC sends now (DJI layout, all quantised as the real ESC does).
+    pub fn feedback_frame(&self) -> Option<CanFrame> {
+        let p = self.params;
+        let counts = (self.rotor_angle / TAU * 8192.0).floor().rem_euclid(8192.0) as u16;
+        let rotor_rpm = (self.omega * p.gear_ratio * 60.0 / TAU)
+            .round()
+            .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+        let current_raw = (self.current / p.feedback_amps_per_raw)
+            .round()
+            .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+        let temp = if p.reports_temperature {
+            self.temperature.round().clamp(0.0, 255.0) as u8
+        } else {
+            0
+        };
+        let a = counts.to_be_bytes();
+        let r = rotor_rpm.to_be_bytes();
+        let c = current_raw.to_be_bytes();
+        CanFrame::standard(
+            p.model.feedback_id(self.esc_id),
+            &[a[0], a[1], r[0], r[1], c[0], c[1], temp, 0],
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run_full_current(params: MotorParams, seconds: f64) -> DjiEsc {
+        let mut esc = DjiEsc::new(params, 1, Load::default(), 0);
+        esc.command_raw = 16384.0;
+        let dt = 1e-4;
+        for k in 0..(seconds / dt) as u64 {
+            esc.step(k * 100, dt);
+        }
+        esc
+    }
+
+    #[test]
+    fn m3508_full_current_reaches_no_load_speed_minus_friction() {
+        let esc = run_full_current(MotorParams::m3508(), 1.0);
+        // Friction at ~480 rpm: 0.03 + 2e-3 · 50 = 0.13 N·m → 9 rpm below 482.
+        let n = esc.speed_rpm();
+        assert!(n > 465.0 && n < 482.0, "n = {n}");
+    }
+
+    #[test]
+    fn m3508_initial_acceleration_matches_torque_over_inertia() {
+        let esc = run_full_current(MotorParams::m3508(), 0.01);
+        // 10 ms at ≈ (0.25 · 20 − friction) / 6.5e-3 ≈ 760 rad/s² after the 0.5 ms current lag:
+        // ≈ 7.2 rad/s ≈ 69 rpm.
+        let n = esc.speed_rpm();
+        assert!(n > 62.0 && n < 74.0, "n = {n}");
+    }
+
+    #[test]
+    fn feedback_frame_quantises_like_the_esc() {
+        let mut esc = DjiEsc::new(MotorParams::m3508(), 3, Load::default(), 0);
+        esc.rotor_angle = TAU * 1.5; // half a rotor turn past one turn: 4096 counts
+        esc.omega = 10.0 * TAU / 60.0; // 10 rpm output = 192.03 rpm rotor → 192
+        esc.current = 2.5; // 2048 raw
+        let f = esc.feedback_frame().unwrap();
+        assert_eq!(f.raw_id(), 0x203);
+        assert_eq!(f.data(), &[0x10, 0x00, 0x00, 0xC0, 0x08, 0x00, 25, 0]);
+    }
+
+    #[test]
+    fn reads_only_its_own_slot() {
+        let mut esc = DjiEsc::new(MotorParams::m3508(), 2, Load::default(), 0);
+        let f = CanFrame::standard(0x200, &[0x11, 0x11, 0x08, 0x00, 0x22, 0x22, 0, 0]).unwrap();
+        esc.on_frame(&f);
+        assert_eq!(esc.command_raw, 2048.0);
+        esc.on_frame(&CanFrame::standard(0x1FF, &[0x7F; 8]).unwrap());
+        assert_eq!(esc.command_raw, 2048.0);
+    }
+
+    #[test]
+    fn gm6020_voltage_no_load_speed_near_320_rpm_at_24v() {
+        let mut esc = DjiEsc::new(MotorParams::gm6020_voltage(), 1, Load::default(), 0);
+        esc.command_raw = 30000.0; // clamped to 25000 = 20 V → ≈ 267 rpm minus friction
+        for k in 0..10_000 {
+            esc.step(k * 100, 1e-4);
+        }
+        let n = esc.speed_rpm();
+        assert!(n > 240.0 && n < 267.0, "n = {n}");
+    }
+
+    #[test]
+    fn unpowered_esc_sends_nothing_and_coasts() {
+        let mut esc = DjiEsc::new(MotorParams::m3508(), 1, Load::default(), 250);
+        assert!(esc.feedback_due(1250));
+        assert!(!esc.feedback_due(1251));
+        assert_eq!(esc.next_feedback_us(1250), 2250);
+        esc.set_powered(false);
+        assert!(!esc.feedback_due(1250));
+        esc.command_raw = 16384.0;
+        esc.step(0, 1e-3);
+        assert_eq!(esc.current_amps(), 0.0);
+    }
+}

@@ -1,0 +1,718 @@
+//! Scenarios (motors, targets, faults) and the world loop that runs rc10-core's real bus,
+//! scheduler and drivers against the simulated bus and plants in deterministic virtual time.
+//!
+//! Time advances from event to event in whole microseconds: plant integration every 100 µs,
+//! the rc10 tick every 1 ms, each ESC's feedback every 1 ms at its own (seeded) phase, and frame
+//! ends on the bus. Received frames are dispatched to rc10 the moment they end on the wire,
+//! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled.
+
+use crate::bus::{Sender, SimBus, SimBusConfig, SimBusStats};
+use crate::legacy::LegacyM3508;
+use crate::metrics::{StepMetrics, step_metrics};
+use crate::plant::{DjiEsc, Load, MotorParams};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rand_xoshiro::rand_core::{Rng, SeedableRng};
+use rc10_core::bus::{BusBuilder, BusConfig, FrameBudget, RegisterError};
+use rc10_core::can::{BusCounters, CanFrame};
+use rc10_core::math::wrap_deg_180;
+use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
+use rc10_core::motor::{Motor, TargetError};
+use rc10_core::node::{CanNode, TxBatch};
+use rc10_core::time::Instant;
+use std::fmt;
+
+/// Most motors one simulated bus takes (rc10's registry capacity in the simulator).
+pub const MAX_MOTORS: usize = 8;
+
+/// Which controller drives a simulated motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Controller {
+    /// rc10's DJI driver with its shipped defaults.
+    Rc10,
+    /// rc10's DJI driver with this configuration.
+    Rc10With(DjiConfig),
+    /// RC10_LIB's demo speed loop (M3508 only), for comparison.
+    Rc10Legacy,
+}
+
+/// One motor of a scenario.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorSpec {
+    /// Model (and command mode for the GM6020).
+    pub model: DjiModel,
+    /// ESC id.
+    pub esc_id: u8,
+    /// What it drives.
+    pub load: Load,
+    /// Which controller.
+    pub controller: Controller,
+}
+
+/// What a target value means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TargetKind {
+    /// Current in amps.
+    Current,
+    /// Output speed in rpm.
+    Rpm,
+    /// Output angle in degrees, shortest way.
+    AngleDeg,
+    /// Output multi-turn angle in degrees.
+    TotalAngleDeg,
+}
+
+/// A target profile for one motor: values set at given times.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetSpec {
+    /// Index into [`Scenario::motors`].
+    pub motor: usize,
+    /// What the values mean.
+    pub kind: TargetKind,
+    /// `(time in ms, value)`, in time order.
+    pub steps: Vec<(u64, f32)>,
+}
+
+/// An injected fault.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// The motor's ESC loses power (referee cut) in `[from_ms, to_ms)`.
+    PowerCut {
+        /// Motor index.
+        motor: usize,
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+    /// The rotor is locked in `[from_ms, to_ms)`.
+    Stall {
+        /// Motor index.
+        motor: usize,
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+    /// The winding is forced to `celsius` at `at_ms`.
+    OverTemperature {
+        /// Motor index.
+        motor: usize,
+        /// When, ms.
+        at_ms: u64,
+        /// Temperature, °C.
+        celsius: f64,
+    },
+    /// Each frame on the wire is lost with `probability` in `[from_ms, to_ms)`.
+    FrameLoss {
+        /// Probability per frame, 0–1.
+        probability: f64,
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+    /// Each frame arrives with a wrong DLC with `probability` in `[from_ms, to_ms)`.
+    Corruption {
+        /// Probability per frame, 0–1.
+        probability: f64,
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+}
+
+/// Everything a run needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// Short name (`m3508-speed-step`).
+    pub name: String,
+    /// One line saying what it shows.
+    pub description: String,
+    /// Simulated time, ms.
+    pub duration_ms: u64,
+    /// Seed for everything random (ESC phases, faults).
+    pub seed: u64,
+    /// The motors, all on one bus.
+    pub motors: Vec<MotorSpec>,
+    /// Target profiles.
+    pub targets: Vec<TargetSpec>,
+    /// Injected faults.
+    pub faults: Vec<Fault>,
+    /// rc10 bus configuration (bitrate, registration budget).
+    pub bus: BusConfig,
+}
+
+/// Why a scenario could not run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SimError {
+    /// A motor spec is invalid (id out of range, legacy controller on a non-M3508…).
+    InvalidMotor {
+        /// Motor index.
+        motor: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// rc10 refused to register a motor (this is what a robot would see at start-up).
+    Register {
+        /// Motor index.
+        motor: usize,
+        /// rc10's error.
+        error: RegisterError,
+    },
+    /// A target refers to a missing motor or was refused.
+    Target {
+        /// Target index.
+        target: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::InvalidMotor { motor, reason } => write!(f, "motor {motor}: {reason}"),
+            Self::Register { motor, error } => {
+                write!(f, "motor {motor} cannot be registered: {error}")
+            }
+            Self::Target { target, reason } => write!(f, "target {target}: {reason}"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// One motor at one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MotorSample {
+    /// Active target (mode's unit).
+    pub target: f32,
+    /// Physical output speed, rpm.
+    pub true_rpm: f64,
+    /// Physical output angle, continuous degrees.
+    pub true_total_deg: f64,
+    /// Speed rc10 sees, rpm.
+    pub measured_rpm: f32,
+    /// Multi-turn angle rc10 sees, degrees.
+    pub measured_total_deg: f32,
+    /// Command rc10 sent (amps or volts).
+    pub command: f32,
+    /// Physical winding current, amps.
+    pub current_amps: f64,
+    /// Physical winding temperature, °C.
+    pub temperature_c: f64,
+    /// Whether rc10 considers the motor online.
+    pub online: bool,
+}
+
+/// All motors at one tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Time, ms.
+    pub t_ms: u64,
+    /// One per motor, in scenario order.
+    pub motors: Vec<MotorSample>,
+}
+
+/// Step metrics of one target profile's last step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetMetrics {
+    /// Target index.
+    pub target: usize,
+    /// Motor index.
+    pub motor: usize,
+    /// What was stepped.
+    pub kind: TargetKind,
+    /// The figures.
+    pub metrics: StepMetrics,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunResult {
+    /// The scenario's name.
+    pub name: String,
+    /// One sample per ms.
+    pub samples: Vec<Sample>,
+    /// The simulated bus's counters.
+    pub bus: SimBusStats,
+    /// rc10's own bus counters.
+    pub counters: BusCounters,
+    /// rc10's frame budget for the registered motors.
+    pub budget: FrameBudget,
+    /// Offline events per motor, as rc10 counted them.
+    pub offline_events: Vec<u32>,
+    /// Step metrics per stepped target.
+    pub metrics: Vec<TargetMetrics>,
+}
+
+/// A motor the simulator can drive: rc10's scheduler side and the application side.
+trait SimMotor: CanNode + Motor {}
+impl<T: CanNode + Motor> SimMotor for T {}
+
+fn build_motor(index: usize, spec: &MotorSpec) -> Result<Box<dyn SimMotor>, SimError> {
+    let invalid = |reason: String| SimError::InvalidMotor {
+        motor: index,
+        reason,
+    };
+    match spec.controller {
+        Controller::Rc10 => {
+            let cfg = DjiConfig::default_for(spec.model);
+            DjiMotor::new(spec.model, spec.esc_id, cfg)
+                .map(|m| Box::new(m) as Box<dyn SimMotor>)
+                .map_err(|e| invalid(e.to_string()))
+        }
+        Controller::Rc10With(cfg) => DjiMotor::new(spec.model, spec.esc_id, cfg)
+            .map(|m| Box::new(m) as Box<dyn SimMotor>)
+            .map_err(|e| invalid(e.to_string())),
+        Controller::Rc10Legacy => {
+            if spec.model != DjiModel::M3508 {
+                return Err(invalid("the RC10_LIB controller is for M3508 only".into()));
+            }
+            LegacyM3508::new(spec.esc_id)
+                .map(|m| Box::new(m) as Box<dyn SimMotor>)
+                .ok_or_else(|| invalid(format!("ESC id {} out of range", spec.esc_id)))
+        }
+    }
+}
+
+fn apply_target(motor: &dyn SimMotor, kind: TargetKind, value: f32) -> Result<(), TargetError> {
+    match kind {
+        TargetKind::Current => motor.set_target_current(value),
+        TargetKind::Rpm => motor.set_target_rpm(value),
+        TargetKind::AngleDeg => motor.set_target_angle_deg(value),
+        TargetKind::TotalAngleDeg => motor.set_target_total_angle_deg(value),
+    }
+}
+
+/// A uniform number in [0, 1) from the run's generator.
+fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
+    (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+}
+
+const PLANT_STEP_US: u64 = 200;
+const TICK_US: u64 = 1000;
+
+/// Runs `scenario` and returns its trace and figures. Same scenario, same result, always.
+pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(scenario.seed);
+    let motors: Vec<Box<dyn SimMotor>> = scenario
+        .motors
+        .iter()
+        .enumerate()
+        .map(|(i, spec)| build_motor(i, spec))
+        .collect::<Result<_, _>>()?;
+    let mut builder = BusBuilder::<MAX_MOTORS>::with_config(scenario.bus);
+    for (i, m) in motors.iter().enumerate() {
+        builder
+            .register(&**m as &dyn CanNode)
+            .map_err(|error| SimError::Register { motor: i, error })?;
+    }
+    let rc10 = builder.build();
+    for (i, t) in scenario.targets.iter().enumerate() {
+        if t.motor >= motors.len() {
+            return Err(SimError::Target {
+                target: i,
+                reason: format!("no motor {}", t.motor),
+            });
+        }
+    }
+
+    let mut bus = SimBus::new(SimBusConfig {
+        bitrate_bps: scenario.bus.bitrate_bps,
+        ..SimBusConfig::default()
+    });
+    let mut escs: Vec<DjiEsc> = Vec::new();
+    let mut next_feedback: Vec<u64> = Vec::new();
+    for spec in &scenario.motors {
+        bus.add_device();
+        let phase = rng.next_u64() % TICK_US;
+        escs.push(DjiEsc::new(
+            MotorParams::for_model(spec.model),
+            spec.esc_id,
+            spec.load,
+            phase,
+        ));
+        next_feedback.push(phase);
+    }
+
+    let end_us = scenario.duration_ms * 1000;
+    let (mut next_plant, mut next_tick) = (0u64, 0u64);
+    let mut batch = TxBatch::new();
+    let mut samples = Vec::with_capacity(scenario.duration_ms as usize);
+    let mut next_step = vec![0usize; scenario.targets.len()];
+
+    loop {
+        let mut t = next_plant.min(next_tick);
+        if let Some(&f) = next_feedback.iter().min() {
+            t = t.min(f);
+        }
+        if let Some(b) = bus.busy_until() {
+            t = t.min(b);
+        }
+        if t >= end_us {
+            break;
+        }
+        let t_ms = t / 1000;
+
+        // A frame ends on the wire: faults, then delivery to everyone but its sender.
+        if let Some((sender, frame)) = bus.complete(t) {
+            deliver(
+                scenario, &mut rng, &mut bus, &rc10, &mut escs, sender, frame, t, t_ms,
+            );
+        }
+
+        if t == next_plant {
+            apply_state_faults(scenario, &mut escs, t_ms, t % 1000 == 0);
+            for esc in &mut escs {
+                esc.step(t, PLANT_STEP_US as f64 * 1e-6);
+            }
+            next_plant += PLANT_STEP_US;
+        }
+
+        for (i, esc) in escs.iter().enumerate() {
+            if next_feedback.get(i) == Some(&t) {
+                if esc.feedback_due(t)
+                    && let Some(frame) = esc.feedback_frame()
+                {
+                    bus.device_send(i, frame);
+                }
+                if let Some(n) = next_feedback.get_mut(i) {
+                    *n += TICK_US;
+                }
+            }
+        }
+
+        if t == next_tick {
+            for (i, spec) in scenario.targets.iter().enumerate() {
+                let Some(k) = next_step.get_mut(i) else {
+                    continue;
+                };
+                while let Some(&(at_ms, value)) = spec.steps.get(*k) {
+                    if at_ms > t_ms {
+                        break;
+                    }
+                    if let Some(m) = motors.get(spec.motor) {
+                        apply_target(&**m, spec.kind, value).map_err(|e| SimError::Target {
+                            target: i,
+                            reason: e.to_string(),
+                        })?;
+                    }
+                    *k += 1;
+                }
+            }
+            let now = Instant::from_micros(t);
+            rc10.tick(now, TICK_US as f32 * 1e-6, &mut batch);
+            rc10.transmit(&batch, &mut bus.mcu_port());
+            samples.push(Sample {
+                t_ms,
+                motors: motors
+                    .iter()
+                    .zip(&escs)
+                    .map(|(m, esc)| {
+                        let s = m.state();
+                        MotorSample {
+                            target: s.target,
+                            true_rpm: esc.speed_rpm(),
+                            true_total_deg: esc.total_angle_deg(),
+                            measured_rpm: s.speed_rpm,
+                            measured_total_deg: s.total_angle_deg,
+                            command: s.command,
+                            current_amps: esc.current_amps(),
+                            temperature_c: esc.temperature_c(),
+                            online: s.online,
+                        }
+                    })
+                    .collect(),
+            });
+            next_tick += TICK_US;
+        }
+
+        bus.start_next(t);
+    }
+
+    let metrics = scenario
+        .targets
+        .iter()
+        .enumerate()
+        .filter_map(|(i, spec)| target_metrics(i, spec, &samples))
+        .collect();
+    Ok(RunResult {
+        name: scenario.name.clone(),
+        bus: bus.stats(),
+        counters: rc10.stats().snapshot(),
+        budget: rc10.budget(),
+        offline_events: motors.iter().map(|m| m.state().offline_events).collect(),
+        metrics,
+        samples,
+    })
+}
+
+fn in_window(t_ms: u64, from_ms: u64, to_ms: u64) -> bool {
+    (from_ms..to_ms).contains(&t_ms)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn deliver(
+    scenario: &Scenario,
+    rng: &mut Xoshiro256PlusPlus,
+    bus: &mut SimBus,
+    rc10: &rc10_core::bus::Bus<'_, MAX_MOTORS>,
+    escs: &mut [DjiEsc],
+    sender: Sender,
+    frame: CanFrame,
+    t_us: u64,
+    t_ms: u64,
+) {
+    let mut frame = frame;
+    for fault in &scenario.faults {
+        match *fault {
+            Fault::FrameLoss {
+                probability,
+                from_ms,
+                to_ms,
+            } if in_window(t_ms, from_ms, to_ms) && uniform(rng) < probability => {
+                bus.record_lost();
+                return;
+            }
+            Fault::Corruption {
+                probability,
+                from_ms,
+                to_ms,
+            } if in_window(t_ms, from_ms, to_ms) && uniform(rng) < probability => {
+                // A wrong DLC: the receiver must reject it, not parse garbage.
+                let cut = frame
+                    .data()
+                    .len()
+                    .saturating_sub(1 + (rng.next_u64() % 4) as usize);
+                if let Some(short) =
+                    CanFrame::new(frame.id(), frame.data().get(..cut).unwrap_or(&[]))
+                {
+                    frame = short;
+                }
+            }
+            _ => {}
+        }
+    }
+    if sender != Sender::Mcu {
+        rc10.dispatch(&frame, Instant::from_micros(t_us));
+    }
+    for (i, esc) in escs.iter_mut().enumerate() {
+        if sender != Sender::Device(i) {
+            esc.on_frame(&frame);
+        }
+    }
+}
+
+fn apply_state_faults(scenario: &Scenario, escs: &mut [DjiEsc], t_ms: u64, on_ms_edge: bool) {
+    for fault in &scenario.faults {
+        match *fault {
+            Fault::PowerCut {
+                motor,
+                from_ms,
+                to_ms,
+            } => {
+                if let Some(esc) = escs.get_mut(motor) {
+                    esc.set_powered(!in_window(t_ms, from_ms, to_ms));
+                }
+            }
+            Fault::Stall {
+                motor,
+                from_ms,
+                to_ms,
+            } => {
+                if let Some(esc) = escs.get_mut(motor) {
+                    esc.set_locked(in_window(t_ms, from_ms, to_ms));
+                }
+            }
+            Fault::OverTemperature {
+                motor,
+                at_ms,
+                celsius,
+            } if on_ms_edge && t_ms == at_ms => {
+                if let Some(esc) = escs.get_mut(motor) {
+                    esc.set_temperature_c(celsius);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Step metrics of a target profile's last step, on the physical signal.
+fn target_metrics(index: usize, spec: &TargetSpec, samples: &[Sample]) -> Option<TargetMetrics> {
+    if spec.kind == TargetKind::Current {
+        return None;
+    }
+    let &(at_ms, value) = spec.steps.last()?;
+    let signal = |s: &MotorSample| match spec.kind {
+        TargetKind::Rpm => s.true_rpm,
+        _ => s.true_total_deg,
+    };
+    let pick = |s: &Sample| s.motors.get(spec.motor).copied();
+    let before = samples.iter().find(|s| s.t_ms >= at_ms).and_then(pick)?;
+    let y0 = signal(&before);
+    let target = match spec.kind {
+        // The shortest way from where the motor was.
+        TargetKind::AngleDeg => y0 + f64::from(wrap_deg_180(value - y0 as f32)),
+        _ => f64::from(value),
+    };
+    let (mut t, mut y, mut i) = (Vec::new(), Vec::new(), Vec::new());
+    for s in samples.iter().filter(|s| s.t_ms >= at_ms) {
+        if let Some(m) = pick(s) {
+            t.push(s.t_ms as f64 * 1e-3);
+            y.push(signal(&m));
+            i.push(m.current_amps);
+        }
+    }
+    Some(TargetMetrics {
+        target: index,
+        motor: spec.motor,
+        kind: spec.kind,
+        metrics: step_metrics(&t, &y, &i, at_ms as f64 * 1e-3, y0, target),
+    })
+}
+
+fn m3508(esc_id: u8, controller: Controller) -> MotorSpec {
+    MotorSpec {
+        model: DjiModel::M3508,
+        esc_id,
+        load: Load::default(),
+        controller,
+    }
+}
+
+/// The built-in scenarios, the first being the default.
+pub fn builtin() -> Vec<Scenario> {
+    let base = |name: &str, description: &str, duration_ms: u64| Scenario {
+        name: name.into(),
+        description: description.into(),
+        duration_ms,
+        seed: 1,
+        motors: Vec::new(),
+        targets: Vec::new(),
+        faults: Vec::new(),
+        bus: BusConfig::DEFAULT,
+    };
+    let speed_step = |motor| TargetSpec {
+        motor,
+        kind: TargetKind::Rpm,
+        steps: vec![(10, 300.0)],
+    };
+    vec![
+        Scenario {
+            motors: vec![m3508(1, Controller::Rc10)],
+            targets: vec![speed_step(0)],
+            ..base(
+                "m3508-speed-step",
+                "unloaded M3508, speed step 0 -> 300 rpm with rc10's default gains",
+                400,
+            )
+        },
+        Scenario {
+            motors: vec![m3508(1, Controller::Rc10Legacy)],
+            targets: vec![speed_step(0)],
+            ..base(
+                "m3508-speed-step-rc10lib",
+                "the same step with RC10_LIB's demo speed loop, for comparison (3 s: it is slow)",
+                3000,
+            )
+        },
+        Scenario {
+            motors: vec![m3508(1, Controller::Rc10)],
+            targets: vec![TargetSpec {
+                motor: 0,
+                kind: TargetKind::AngleDeg,
+                steps: vec![(10, 350.0)],
+            }],
+            ..base(
+                "m3508-angle-step",
+                "M3508 angle step 0 -> 350 deg: the short way is 10 deg backwards",
+                600,
+            )
+        },
+        Scenario {
+            motors: vec![MotorSpec {
+                model: DjiModel::Gm6020Voltage,
+                esc_id: 1,
+                load: Load {
+                    inertia_kg_m2: 0.01,
+                    torque_nm: 0.0,
+                    step: Some((400_000, 0.5)),
+                },
+                controller: Controller::Rc10,
+            }],
+            targets: vec![TargetSpec {
+                motor: 0,
+                kind: TargetKind::AngleDeg,
+                steps: vec![(10, 90.0)],
+            }],
+            ..base(
+                "gm6020-gimbal",
+                "GM6020 gimbal (0.01 kg m^2) to 90 deg, then a 0.5 N m load torque step at 400 ms",
+                800,
+            )
+        },
+        Scenario {
+            motors: (1..=4)
+                .map(|id| MotorSpec {
+                    load: Load {
+                        inertia_kg_m2: 0.02,
+                        ..Load::default()
+                    },
+                    ..m3508(id, Controller::Rc10)
+                })
+                .collect(),
+            targets: (0..4)
+                .map(|m| TargetSpec {
+                    motor: m,
+                    kind: TargetKind::Rpm,
+                    steps: vec![(10, if m % 2 == 0 { 250.0 } else { -250.0 })],
+                })
+                .collect(),
+            ..base(
+                "chassis-4x-m3508",
+                "four M3508 wheels (0.02 kg m^2 each) on one bus, +/-250 rpm",
+                1000,
+            )
+        },
+        Scenario {
+            motors: vec![m3508(1, Controller::Rc10), m3508(2, Controller::Rc10)],
+            targets: vec![
+                TargetSpec {
+                    motor: 0,
+                    kind: TargetKind::Rpm,
+                    steps: vec![(10, 200.0)],
+                },
+                TargetSpec {
+                    motor: 1,
+                    kind: TargetKind::Rpm,
+                    steps: vec![(10, 200.0)],
+                },
+            ],
+            faults: vec![
+                Fault::PowerCut {
+                    motor: 0,
+                    from_ms: 300,
+                    to_ms: 500,
+                },
+                Fault::FrameLoss {
+                    probability: 0.05,
+                    from_ms: 0,
+                    to_ms: 1000,
+                },
+                Fault::Corruption {
+                    probability: 0.01,
+                    from_ms: 0,
+                    to_ms: 1000,
+                },
+            ],
+            ..base(
+                "fault-power-cut",
+                "two M3508 at 200 rpm; motor 1 loses power 300-500 ms; 5 % frame loss, 1 % corruption",
+                1000,
+            )
+        },
+    ]
+}

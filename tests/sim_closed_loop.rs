@@ -1,0 +1,192 @@
+//! Closed loop through the simulator: rc10-core's real bus, scheduler and DJI drivers against
+//! the physical ESC + motor plants on a simulated CAN bus, in virtual time.
+
+// Test code: a failed setup or assertion should stop the test.
+#![allow(clippy::unwrap_used, clippy::panic, clippy::indexing_slicing)]
+
+use rc10_core::bus::RegisterError;
+use rc10_core::motor::dji::DjiModel;
+use rc10_sim::metrics::min_speed_rise_time_s;
+use rc10_sim::plant::{Load, MotorParams};
+use rc10_sim::scenario::{
+    Controller, MotorSpec, RunResult, Scenario, SimError, TargetKind, TargetSpec, builtin, run,
+};
+
+fn scenario(name: &str) -> Scenario {
+    builtin().into_iter().find(|s| s.name == name).unwrap()
+}
+
+fn motor_series(r: &RunResult, motor: usize) -> Vec<(u64, rc10_sim::scenario::MotorSample)> {
+    r.samples
+        .iter()
+        .map(|s| (s.t_ms, s.motors[motor]))
+        .collect()
+}
+
+#[test]
+fn m3508_speed_step_meets_the_control_targets_with_default_gains() {
+    let r = run(&scenario("m3508-speed-step")).unwrap();
+    let m = r.metrics[0].metrics;
+    let min = min_speed_rise_time_s(MotorParams::m3508(), Load::default(), 300.0).unwrap();
+    // SPEC.md quality targets.
+    assert!(
+        m.rise_time_s.unwrap() <= 1.5 * min,
+        "rise {:?} vs min {min}",
+        m.rise_time_s
+    );
+    assert!(
+        m.overshoot_percent <= 5.0,
+        "overshoot {}",
+        m.overshoot_percent
+    );
+    assert!(
+        m.settling_time_s.unwrap() <= 0.100,
+        "settling {:?}",
+        m.settling_time_s
+    );
+    assert!(
+        m.steady_state_error <= 1.0,
+        "steady error {}",
+        m.steady_state_error
+    );
+    assert!(m.peak_current_amps <= 20.0 + 1e-9);
+}
+
+#[test]
+fn rc10_beats_rc10_lib_demo_loop_on_every_metric() {
+    // Both over RC10_LIB's 3 s window, long enough for its slow transient to finish.
+    let legacy = scenario("m3508-speed-step-rc10lib");
+    let mut ours = scenario("m3508-speed-step");
+    ours.duration_ms = legacy.duration_ms;
+    let ours = run(&ours).unwrap().metrics[0].metrics;
+    let theirs = run(&legacy).unwrap().metrics[0].metrics;
+    let never = f64::INFINITY;
+    assert!(ours.rise_time_s.unwrap() < theirs.rise_time_s.unwrap_or(never));
+    assert!(ours.settling_time_s.unwrap() < theirs.settling_time_s.unwrap_or(never));
+    assert!(ours.overshoot_percent < theirs.overshoot_percent);
+    assert!(ours.steady_state_error < theirs.steady_state_error);
+    assert!(ours.iae < theirs.iae);
+}
+
+#[test]
+fn angle_step_across_zero_goes_the_short_way() {
+    // From 0° to 350°: 10° backwards, never forwards.
+    let r = run(&scenario("m3508-angle-step")).unwrap();
+    let series = motor_series(&r, 0);
+    let max = series
+        .iter()
+        .map(|(_, m)| m.true_total_deg)
+        .fold(f64::MIN, f64::max);
+    let min = series
+        .iter()
+        .map(|(_, m)| m.true_total_deg)
+        .fold(f64::MAX, f64::min);
+    assert!(max < 0.5, "moved forwards to {max}°");
+    assert!(min > -10.5, "overshot to {min}°");
+    let end = series.last().unwrap().1.true_total_deg;
+    assert!((end + 10.0).abs() < 0.2, "ended at {end}°");
+}
+
+#[test]
+fn gm6020_gimbal_holds_angle_under_a_load_torque_step() {
+    let r = run(&scenario("gm6020-gimbal")).unwrap();
+    let series = motor_series(&r, 0);
+    let before = series
+        .iter()
+        .find(|(t, _)| *t == 399)
+        .unwrap()
+        .1
+        .true_total_deg;
+    assert!(
+        (before - 90.0).abs() < 0.5,
+        "not at 90° before the load step: {before}"
+    );
+    let worst = series
+        .iter()
+        .filter(|(t, _)| *t >= 400)
+        .map(|(_, m)| (m.true_total_deg - 90.0).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 2.0, "load step pushed it {worst}° away");
+    let end = series.last().unwrap().1.true_total_deg;
+    assert!((end - 90.0).abs() < 0.2, "ended {end}°");
+}
+
+#[test]
+fn power_cut_is_detected_within_timeout_commands_zero_and_recovers() {
+    let r = run(&scenario("fault-power-cut")).unwrap();
+    let series = motor_series(&r, 0);
+    // Power goes at 300 ms: offline by 300 + 100 ms timeout + a tick of slack.
+    let went_offline = series
+        .iter()
+        .find(|(t, m)| *t > 300 && !m.online)
+        .unwrap()
+        .0;
+    assert!(went_offline <= 402, "offline detected at {went_offline} ms");
+    assert!(
+        went_offline >= 390,
+        "offline too early at {went_offline} ms (5 % frame loss)"
+    );
+    for (t, m) in &series {
+        if !m.online && *t > 300 {
+            assert_eq!(m.command, 0.0, "command at {t} ms while offline");
+        }
+    }
+    // Power returns at 500 ms: online within a few ms, and back at speed by 700 ms.
+    let back = series
+        .iter()
+        .find(|(t, m)| *t >= 500 && m.online)
+        .unwrap()
+        .0;
+    assert!(back <= 505, "back online at {back} ms");
+    let at_700 = series.iter().find(|(t, _)| *t == 700).unwrap().1.true_rpm;
+    assert!((at_700 - 200.0).abs() < 4.0, "{at_700} rpm at 700 ms");
+    assert_eq!(r.offline_events, vec![1, 0]);
+    // The injected faults were seen and counted, not hidden.
+    assert!(r.bus.lost > 0);
+    assert!(r.counters.rx_rejected > 0);
+    // The other motor kept running through the 5 % loss.
+    let other = r.samples.last().unwrap().motors[1].true_rpm;
+    assert!((other - 200.0).abs() < 2.0);
+}
+
+#[test]
+fn overloaded_bus_is_reported_at_registration() {
+    let mut s = scenario("m3508-speed-step");
+    s.motors = (1..=7)
+        .map(|id| MotorSpec {
+            model: DjiModel::M3508,
+            esc_id: id,
+            load: Load::default(),
+            controller: Controller::Rc10,
+        })
+        .collect();
+    match run(&s) {
+        Err(SimError::Register {
+            motor: 6,
+            error: RegisterError::FrameBudget { load_percent },
+        }) => assert!(load_percent > 90.0),
+        other => panic!("expected a frame-budget error, got {other:?}"),
+    }
+}
+
+#[test]
+fn same_seed_same_trace_different_seed_different_trace() {
+    let a = run(&scenario("fault-power-cut")).unwrap();
+    let b = run(&scenario("fault-power-cut")).unwrap();
+    assert_eq!(a, b);
+    let mut other = scenario("fault-power-cut");
+    other.seed = 2;
+    let c = run(&other).unwrap();
+    assert_ne!(a.samples, c.samples);
+}
+
+#[test]
+fn targets_for_missing_motors_are_an_error() {
+    let mut s = scenario("m3508-speed-step");
+    s.targets.push(TargetSpec {
+        motor: 5,
+        kind: TargetKind::Rpm,
+        steps: vec![(0, 1.0)],
+    });
+    assert!(matches!(run(&s), Err(SimError::Target { target: 1, .. })));
+}
