@@ -190,3 +190,97 @@ fn targets_for_missing_motors_are_an_error() {
     });
     assert!(matches!(run(&s), Err(SimError::Target { target: 1, .. })));
 }
+
+fn example_file(name: &str) -> Scenario {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../examples/sim")
+        .join(name);
+    rc10_sim::file::load(&path).unwrap()
+}
+
+#[test]
+fn example_yaw_tuning_file_reaches_both_targets_and_resists_the_push() {
+    let r = run(&example_file("yaw-tuning.toml")).unwrap();
+    let series = motor_series(&r, 0);
+    let at = |t: u64| {
+        series
+            .iter()
+            .find(|(ms, _)| *ms == t)
+            .unwrap()
+            .1
+            .true_total_deg
+    };
+    assert!((at(590) - 90.0).abs() < 0.5, "{}", at(590));
+    assert!((at(1090) + 45.0).abs() < 0.5, "{}", at(1090));
+    let worst_after_push = series
+        .iter()
+        .filter(|(t, _)| *t >= 1100)
+        .map(|(_, m)| (m.true_total_deg + 45.0).abs())
+        .fold(0.0, f64::max);
+    assert!(worst_after_push < 2.0, "{worst_after_push}");
+}
+
+#[test]
+fn example_chassis_file_isolates_the_unpowered_wheel() {
+    let r = run(&example_file("chassis-power-cut.toml")).unwrap();
+    assert_eq!(r.offline_events, vec![0, 1, 0, 0]);
+    let end = &r.samples.last().unwrap().motors;
+    for (m, target) in end.iter().zip([200.0, 200.0, -200.0, -200.0]) {
+        assert!(
+            (m.true_rpm - target).abs() < 2.0,
+            "{} vs {target}",
+            m.true_rpm
+        );
+    }
+}
+
+fn single_m3508_at(rpm: f32, faults: Vec<rc10_sim::scenario::Fault>, duration_ms: u64) -> Scenario {
+    let mut s = scenario("m3508-speed-step");
+    s.targets[0].steps = vec![(10, rpm)];
+    s.faults = faults;
+    s.duration_ms = duration_ms;
+    s
+}
+
+#[test]
+fn bus_off_interval_is_counted_motor_goes_offline_and_control_resumes() {
+    use rc10_sim::scenario::Fault;
+    let s = single_m3508_at(
+        200.0,
+        vec![Fault::BusOff {
+            from_ms: 300,
+            to_ms: 450,
+        }],
+        900,
+    );
+    let r = run(&s).unwrap();
+    assert_eq!(r.counters.bus_off_events, 1);
+    assert!(r.counters.tx_bus_off >= 140, "{}", r.counters.tx_bus_off);
+    // 150 ms without feedback: offline once, then back.
+    assert_eq!(r.offline_events, vec![1]);
+    let end = r.samples.last().unwrap().motors[0];
+    assert!(end.online);
+    assert!((end.true_rpm - 200.0).abs() < 1.0, "{}", end.true_rpm);
+}
+
+#[test]
+fn delayed_feedback_still_controls_within_targets() {
+    use rc10_sim::scenario::Fault;
+    // Every frame reaches rc10 2 ms late: older feedback, same loop.
+    let s = single_m3508_at(
+        300.0,
+        vec![Fault::Delay {
+            delay_us: 2000,
+            from_ms: 0,
+            to_ms: 400,
+        }],
+        400,
+    );
+    let r = run(&s).unwrap();
+    let m = r.metrics[0].metrics;
+    assert!(m.overshoot_percent < 10.0, "{}", m.overshoot_percent);
+    assert!(m.steady_state_error < 1.0);
+    // The delay is visible: what rc10 measured lags the truth during the rise.
+    let rising = r.samples.iter().find(|s| s.t_ms == 30).unwrap().motors[0];
+    assert!(f64::from(rising.measured_rpm) < rising.true_rpm - 5.0);
+}

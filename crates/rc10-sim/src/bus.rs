@@ -6,7 +6,7 @@
 //! happens ([`SimBus::busy_until`]), completes frames ([`SimBus::complete`]) and starts the next
 //! one ([`SimBus::start_next`]).
 
-use rc10_core::can::{CanFrame, CanTransmit, Id, SendError, timing};
+use rc10_core::can::{BusStatus, CanFrame, CanTransmit, ErrorState, Id, SendError, timing};
 use std::collections::VecDeque;
 
 /// Which node a frame came from.
@@ -61,6 +61,7 @@ pub struct SimBus {
     mcu_tx: VecDeque<CanFrame>,
     device_tx: Vec<VecDeque<CanFrame>>,
     on_wire: Option<(Sender, CanFrame, u64)>,
+    mcu_bus_off: bool,
     stats: SimBusStats,
 }
 
@@ -72,6 +73,7 @@ impl SimBus {
             mcu_tx: VecDeque::new(),
             device_tx: Vec::new(),
             on_wire: None,
+            mcu_bus_off: false,
             stats: SimBusStats::default(),
         }
     }
@@ -121,6 +123,20 @@ impl SimBus {
             }
             _ => None,
         }
+    }
+
+    /// Puts the controller into bus-off (it sends and receives nothing; its pending TX frames
+    /// are aborted, as the FDCAN does) or lets it recover.
+    pub fn set_mcu_bus_off(&mut self, bus_off: bool) {
+        if bus_off && !self.mcu_bus_off {
+            self.mcu_tx.clear();
+        }
+        self.mcu_bus_off = bus_off;
+    }
+
+    /// Whether the controller is bus-off.
+    pub fn mcu_bus_off(&self) -> bool {
+        self.mcu_bus_off
     }
 
     /// Counts a frame that a fault removed from the wire.
@@ -186,12 +202,27 @@ pub struct McuPort<'a> {
 
 impl CanTransmit for McuPort<'_> {
     fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
+        if self.bus.mcu_bus_off {
+            return Err(SendError::BusOff);
+        }
         if self.bus.mcu_tx.len() >= self.bus.config.mcu_tx_depth {
             self.bus.stats.mcu_tx_full += 1;
             return Err(SendError::Full);
         }
         self.bus.mcu_tx.push_back(*frame);
         Ok(())
+    }
+
+    fn status(&self) -> BusStatus {
+        if self.bus.mcu_bus_off {
+            BusStatus {
+                state: ErrorState::BusOff,
+                tx_error_count: 255,
+                rx_error_count: 0,
+            }
+        } else {
+            BusStatus::default()
+        }
     }
 }
 

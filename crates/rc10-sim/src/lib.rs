@@ -6,6 +6,7 @@
 //! - [`plant`]: ESC + motor models (current loop, back-EMF limit, friction, quantised
 //!   feedback, temperature);
 //! - [`scenario`]: motors, targets and faults, and the world loop;
+//! - [`file`](mod@file): scenario files in TOML;
 //! - [`metrics`]: step-response figures and the full-current minimum rise time;
 //! - [`output`]: metrics table, CSV traces, SVG plots.
 //!
@@ -20,6 +21,7 @@
 #![deny(missing_docs)]
 
 pub mod bus;
+pub mod file;
 pub mod legacy;
 pub mod metrics;
 pub mod output;

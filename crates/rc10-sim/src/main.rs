@@ -4,7 +4,7 @@
 use clap::{Parser, Subcommand};
 use rc10_sim::metrics::min_speed_rise_time_s;
 use rc10_sim::plant::MotorParams;
-use rc10_sim::scenario::{Scenario, TargetKind, builtin, run};
+use rc10_sim::scenario::{Scenario, TargetKind, builtin, run_with_progress};
 use rc10_sim::{output, scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -27,7 +27,7 @@ enum Command {
 
 #[derive(Debug, Parser)]
 struct RunArgs {
-    /// Built-in scenario name (see `list`).
+    /// Built-in scenario name (see `list`) or a scenario file (`*.toml`).
     #[arg(default_value = "m3508-speed-step")]
     scenario: String,
     /// Simulated duration in ms (default: the scenario's).
@@ -51,6 +51,10 @@ fn say(text: &str) {
 }
 
 fn find(name: &str) -> Result<Scenario, String> {
+    let path = std::path::Path::new(name);
+    if name.ends_with(".toml") || path.is_file() {
+        return rc10_sim::file::load(path).map_err(|e| format!("{}: {e}", path.display()));
+    }
     builtin()
         .into_iter()
         .find(|s| s.name == name)
@@ -69,7 +73,18 @@ fn run_cmd(args: RunArgs) -> Result<(), String> {
         scenario.seed = s;
     }
     let started = std::time::Instant::now();
-    let result = run(&scenario).map_err(|e| format!("scenario `{}`: {e}", scenario.name))?;
+    let total_ms = scenario.duration_ms;
+    let mut progress = |t_ms: u64| {
+        // Long runs show where they are (on stderr, so stdout stays a clean table).
+        if total_ms >= 20_000 {
+            eprint!("\r  {:>3} %", t_ms * 100 / total_ms);
+            if t_ms + 1000 > total_ms {
+                eprintln!();
+            }
+        }
+    };
+    let result = run_with_progress(&scenario, &mut progress)
+        .map_err(|e| format!("scenario `{}`: {e}", scenario.name))?;
     let wall = started.elapsed().as_secs_f64();
     say(&output::summary(&scenario, &result));
     // For unloaded speed steps, compare with the fastest rise full current allows.

@@ -11,6 +11,12 @@ fn opt_ms(v: Option<f64>) -> String {
     v.map_or_else(|| "never".to_string(), |s| format!("{:.1} ms", s * 1e3))
 }
 
+/// A value rounded to a whole number, without a "-0".
+fn whole(v: f64) -> String {
+    let r = v.round();
+    format!("{}", if r == 0.0 { 0.0 } else { r })
+}
+
 fn unit(kind: TargetKind) -> &'static str {
     match kind {
         TargetKind::Current => "A",
@@ -42,7 +48,7 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
             s,
             "{:<6} {:>14} {:>10} {:>9.2}% {:>10} {:>8.3} {:<3} {:>10.3} {:>7.2} A",
             m.motor + 1,
-            format!("{:.0}->{:.0} {u}", x.initial, x.target),
+            format!("{}->{} {u}", whole(x.initial), whole(x.target)),
             opt_ms(x.rise_time_s),
             x.overshoot_percent,
             opt_ms(x.settling_time_s),

@@ -111,6 +111,22 @@ pub enum Fault {
         /// End, ms.
         to_ms: u64,
     },
+    /// Frames reach the controller `delay_us` late in `[from_ms, to_ms)` (a slow receive path).
+    Delay {
+        /// Extra latency, µs.
+        delay_us: u64,
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+    /// The controller is bus-off in `[from_ms, to_ms)`: it sends and receives nothing.
+    BusOff {
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
     /// Each frame arrives with a wrong DLC with `probability` in `[from_ms, to_ms)`.
     Corruption {
         /// Probability per frame, 0–1.
@@ -296,6 +312,14 @@ const TICK_US: u64 = 1000;
 
 /// Runs `scenario` and returns its trace and figures. Same scenario, same result, always.
 pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
+    run_with_progress(scenario, &mut |_| {})
+}
+
+/// [`run`], calling `progress` with the simulated time in ms after every simulated second.
+pub fn run_with_progress(
+    scenario: &Scenario,
+    progress: &mut dyn FnMut(u64),
+) -> Result<RunResult, SimError> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(scenario.seed);
     let motors: Vec<Box<dyn SimMotor>> = scenario
         .motors
@@ -342,6 +366,8 @@ pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
     let mut batch = TxBatch::new();
     let mut samples = Vec::with_capacity(scenario.duration_ms as usize);
     let mut next_step = vec![0usize; scenario.targets.len()];
+    // Frames on their way to the controller under a delay fault: (arrival µs, frame).
+    let mut delayed: std::collections::VecDeque<(u64, CanFrame)> = Default::default();
 
     loop {
         let mut t = next_plant.min(next_tick);
@@ -351,6 +377,9 @@ pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
         if let Some(b) = bus.busy_until() {
             t = t.min(b);
         }
+        if let Some(&(d, _)) = delayed.front() {
+            t = t.min(d);
+        }
         if t >= end_us {
             break;
         }
@@ -358,13 +387,28 @@ pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
 
         // A frame ends on the wire: faults, then delivery to everyone but its sender.
         if let Some((sender, frame)) = bus.complete(t) {
-            deliver(
-                scenario, &mut rng, &mut bus, &rc10, &mut escs, sender, frame, t, t_ms,
-            );
+            let to_mcu = deliver(scenario, &mut rng, &mut bus, &mut escs, sender, frame, t_ms);
+            if let Some(frame) = to_mcu {
+                match delay_us(scenario, t_ms) {
+                    0 => {
+                        rc10.dispatch(&frame, Instant::from_micros(t));
+                    }
+                    d => delayed.push_back((t + d, frame)),
+                }
+            }
+        }
+        while let Some(&(d, frame)) = delayed.front() {
+            if d > t {
+                break;
+            }
+            delayed.pop_front();
+            if !bus.mcu_bus_off() {
+                rc10.dispatch(&frame, Instant::from_micros(d));
+            }
         }
 
         if t == next_plant {
-            apply_state_faults(scenario, &mut escs, t_ms, t % 1000 == 0);
+            apply_state_faults(scenario, &mut bus, &mut escs, t_ms, t % 1000 == 0);
             for esc in &mut escs {
                 esc.step(t, PLANT_STEP_US as f64 * 1e-6);
             }
@@ -427,6 +471,9 @@ pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
                     .collect(),
             });
             next_tick += TICK_US;
+            if t_ms % 1000 == 999 {
+                progress(t_ms + 1);
+            }
         }
 
         bus.start_next(t);
@@ -453,18 +500,34 @@ fn in_window(t_ms: u64, from_ms: u64, to_ms: u64) -> bool {
     (from_ms..to_ms).contains(&t_ms)
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The receive delay in force at `t_ms`, µs.
+fn delay_us(scenario: &Scenario, t_ms: u64) -> u64 {
+    scenario
+        .faults
+        .iter()
+        .filter_map(|f| match *f {
+            Fault::Delay {
+                delay_us,
+                from_ms,
+                to_ms,
+            } if in_window(t_ms, from_ms, to_ms) => Some(delay_us),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0)
+}
+
+/// Applies loss and corruption to a frame that ended on the wire, hands it to the ESCs, and
+/// returns it if the controller receives it.
 fn deliver(
     scenario: &Scenario,
     rng: &mut Xoshiro256PlusPlus,
     bus: &mut SimBus,
-    rc10: &rc10_core::bus::Bus<'_, MAX_MOTORS>,
     escs: &mut [DjiEsc],
     sender: Sender,
     frame: CanFrame,
-    t_us: u64,
     t_ms: u64,
-) {
+) -> Option<CanFrame> {
     let mut frame = frame;
     for fault in &scenario.faults {
         match *fault {
@@ -474,7 +537,7 @@ fn deliver(
                 to_ms,
             } if in_window(t_ms, from_ms, to_ms) && uniform(rng) < probability => {
                 bus.record_lost();
-                return;
+                return None;
             }
             Fault::Corruption {
                 probability,
@@ -495,19 +558,26 @@ fn deliver(
             _ => {}
         }
     }
-    if sender != Sender::Mcu {
-        rc10.dispatch(&frame, Instant::from_micros(t_us));
-    }
     for (i, esc) in escs.iter_mut().enumerate() {
         if sender != Sender::Device(i) {
             esc.on_frame(&frame);
         }
     }
+    (sender != Sender::Mcu && !bus.mcu_bus_off()).then_some(frame)
 }
 
-fn apply_state_faults(scenario: &Scenario, escs: &mut [DjiEsc], t_ms: u64, on_ms_edge: bool) {
+fn apply_state_faults(
+    scenario: &Scenario,
+    bus: &mut SimBus,
+    escs: &mut [DjiEsc],
+    t_ms: u64,
+    on_ms_edge: bool,
+) {
     for fault in &scenario.faults {
         match *fault {
+            Fault::BusOff { from_ms, to_ms } => {
+                bus.set_mcu_bus_off(in_window(t_ms, from_ms, to_ms));
+            }
             Fault::PowerCut {
                 motor,
                 from_ms,

@@ -1,0 +1,568 @@
+//! Scenario files: a robot team's motors, gains, loads, target profiles and faults in TOML, so
+//! gains can be tuned in simulation before touching hardware.
+//!
+//! ```toml
+//! name = "yaw-tuning"
+//! description = "GM6020 yaw with the gimbal's inertia"
+//! duration_ms = 800
+//! seed = 1
+//!
+//! [[motor]]
+//! model = "gm6020-voltage"        # m3508 | m2006 | gm6020-voltage | gm6020-current
+//! id = 1                          # ESC id
+//! controller = "rc10"             # rc10 (default) | rc10lib (RC10_LIB's M3508 demo loop)
+//! speed_pid = { kp = 0.8, ki = 20.0, kd = 0.0, output_limit = 20.0 }   # optional
+//! angle_pid = { kp = 3.0, output_limit = 250.0 }                       # optional
+//! angle_divider = 10                                                   # optional
+//! load = { inertia_kg_m2 = 0.01, torque_nm = 0.0, step = { at_ms = 400, torque_nm = 0.5 } }
+//!
+//! [[target]]
+//! motor = 1                       # the first [[motor]] (1-based, in file order)
+//! kind = "angle_deg"              # current | rpm | angle_deg | total_angle_deg
+//! steps = [[10, 90.0]]            # [time in ms, value]
+//!
+//! [[fault]]
+//! kind = "power_cut"  # power_cut | stall | over_temperature | frame_loss | corruption | delay | bus_off
+//! motor = 1
+//! from_ms = 300
+//! to_ms = 500
+//! ```
+//!
+//! Unknown keys are errors, and every error names the entry and field at fault.
+
+use crate::plant::Load;
+use crate::scenario::{Controller, Fault, MotorSpec, Scenario, TargetKind, TargetSpec};
+use rc10_core::bus::BusConfig;
+use rc10_core::motor::dji::{DjiConfig, DjiModel};
+use rc10_core::pid::PidConfig;
+use serde::Deserialize;
+use std::fmt;
+use std::path::Path;
+
+/// Why a scenario file could not be used.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FileError {
+    /// The file could not be read.
+    Io(String),
+    /// The TOML is malformed or does not match the format (unknown key, wrong type, missing
+    /// field); the message names the line and the key.
+    Syntax(String),
+    /// A value is well-formed but unusable; `field` says where (`motor[2].id`).
+    Invalid {
+        /// The entry and key at fault.
+        field: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+}
+
+impl fmt::Display for FileError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io(e) => write!(f, "cannot read scenario file: {e}"),
+            Self::Syntax(e) => write!(f, "scenario file: {e}"),
+            Self::Invalid { field, problem } => write!(f, "scenario file: {field}: {problem}"),
+        }
+    }
+}
+
+impl std::error::Error for FileError {}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileScenario {
+    name: String,
+    #[serde(default)]
+    description: String,
+    duration_ms: u64,
+    #[serde(default = "one")]
+    seed: u64,
+    #[serde(default)]
+    bitrate_bps: Option<u32>,
+    #[serde(default, rename = "motor")]
+    motors: Vec<FileMotor>,
+    #[serde(default, rename = "target")]
+    targets: Vec<FileTarget>,
+    #[serde(default, rename = "fault")]
+    faults: Vec<FileFault>,
+}
+
+fn one() -> u64 {
+    1
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+enum FileModel {
+    M3508,
+    M2006,
+    Gm6020Voltage,
+    Gm6020Current,
+}
+
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum FileController {
+    #[default]
+    Rc10,
+    Rc10lib,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FilePid {
+    kp: f32,
+    #[serde(default)]
+    ki: f32,
+    #[serde(default)]
+    kd: f32,
+    #[serde(default)]
+    output_limit: Option<f32>,
+    #[serde(default)]
+    integral_limit: Option<f32>,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileTorqueStep {
+    at_ms: u64,
+    torque_nm: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileLoad {
+    #[serde(default)]
+    inertia_kg_m2: f64,
+    #[serde(default)]
+    torque_nm: f64,
+    #[serde(default)]
+    step: Option<FileTorqueStep>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileMotor {
+    model: FileModel,
+    id: u8,
+    #[serde(default)]
+    controller: FileController,
+    #[serde(default)]
+    speed_pid: Option<FilePid>,
+    #[serde(default)]
+    angle_pid: Option<FilePid>,
+    #[serde(default)]
+    angle_divider: Option<u8>,
+    #[serde(default)]
+    load: FileLoad,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum FileKind {
+    Current,
+    Rpm,
+    AngleDeg,
+    TotalAngleDeg,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileTarget {
+    motor: usize,
+    kind: FileKind,
+    steps: Vec<(u64, f32)>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+enum FileFault {
+    PowerCut {
+        motor: usize,
+        from_ms: u64,
+        to_ms: u64,
+    },
+    Stall {
+        motor: usize,
+        from_ms: u64,
+        to_ms: u64,
+    },
+    OverTemperature {
+        motor: usize,
+        at_ms: u64,
+        celsius: f64,
+    },
+    FrameLoss {
+        probability: f64,
+        from_ms: u64,
+        to_ms: u64,
+    },
+    Corruption {
+        probability: f64,
+        from_ms: u64,
+        to_ms: u64,
+    },
+    Delay {
+        delay_us: u64,
+        from_ms: u64,
+        to_ms: u64,
+    },
+    BusOff {
+        from_ms: u64,
+        to_ms: u64,
+    },
+}
+
+fn invalid(field: String, problem: impl Into<String>) -> FileError {
+    FileError::Invalid {
+        field,
+        problem: problem.into(),
+    }
+}
+
+/// Reads a scenario file.
+pub fn load(path: &Path) -> Result<Scenario, FileError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| FileError::Io(format!("{}: {e}", path.display())))?;
+    parse(&text)
+}
+
+/// Parses scenario TOML.
+pub fn parse(text: &str) -> Result<Scenario, FileError> {
+    let file: FileScenario = toml::from_str(text).map_err(|e| FileError::Syntax(e.to_string()))?;
+    if file.motors.is_empty() {
+        return Err(invalid("motor".into(), "at least one [[motor]] is needed"));
+    }
+    if file.duration_ms == 0 {
+        return Err(invalid("duration_ms".into(), "must be at least 1"));
+    }
+    let motor_count = file.motors.len();
+    let motor_index = |field: String, motor: usize| {
+        if (1..=motor_count).contains(&motor) {
+            Ok(motor - 1)
+        } else {
+            Err(invalid(
+                field,
+                format!("no motor {motor}: the file has motors 1 to {motor_count}"),
+            ))
+        }
+    };
+    let motors = file
+        .motors
+        .iter()
+        .enumerate()
+        .map(|(i, m)| motor_spec(i + 1, m))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut targets = Vec::new();
+    for (i, t) in file.targets.iter().enumerate() {
+        let n = i + 1;
+        let motor = motor_index(format!("target[{n}].motor"), t.motor)?;
+        if t.steps.windows(2).any(|w| matches!(w, [a, b] if b.0 < a.0)) {
+            return Err(invalid(
+                format!("target[{n}].steps"),
+                "times must not decrease",
+            ));
+        }
+        if let Some((_, v)) = t.steps.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(invalid(
+                format!("target[{n}].steps"),
+                format!("{v} is not a number"),
+            ));
+        }
+        targets.push(TargetSpec {
+            motor,
+            kind: match t.kind {
+                FileKind::Current => TargetKind::Current,
+                FileKind::Rpm => TargetKind::Rpm,
+                FileKind::AngleDeg => TargetKind::AngleDeg,
+                FileKind::TotalAngleDeg => TargetKind::TotalAngleDeg,
+            },
+            steps: t.steps.clone(),
+        });
+    }
+    let mut faults = Vec::new();
+    for (i, f) in file.faults.iter().enumerate() {
+        let n = i + 1;
+        let window = |from: u64, to: u64| {
+            if to > from {
+                Ok(())
+            } else {
+                Err(invalid(
+                    format!("fault[{n}].to_ms"),
+                    "must be after from_ms",
+                ))
+            }
+        };
+        let probability = |p: f64| {
+            if (0.0..=1.0).contains(&p) {
+                Ok(p)
+            } else {
+                Err(invalid(
+                    format!("fault[{n}].probability"),
+                    "must be between 0 and 1",
+                ))
+            }
+        };
+        let field = format!("fault[{n}].motor");
+        faults.push(match *f {
+            FileFault::PowerCut {
+                motor,
+                from_ms,
+                to_ms,
+            } => {
+                window(from_ms, to_ms)?;
+                Fault::PowerCut {
+                    motor: motor_index(field, motor)?,
+                    from_ms,
+                    to_ms,
+                }
+            }
+            FileFault::Stall {
+                motor,
+                from_ms,
+                to_ms,
+            } => {
+                window(from_ms, to_ms)?;
+                Fault::Stall {
+                    motor: motor_index(field, motor)?,
+                    from_ms,
+                    to_ms,
+                }
+            }
+            FileFault::OverTemperature {
+                motor,
+                at_ms,
+                celsius,
+            } => Fault::OverTemperature {
+                motor: motor_index(field, motor)?,
+                at_ms,
+                celsius,
+            },
+            FileFault::FrameLoss {
+                probability: p,
+                from_ms,
+                to_ms,
+            } => {
+                window(from_ms, to_ms)?;
+                Fault::FrameLoss {
+                    probability: probability(p)?,
+                    from_ms,
+                    to_ms,
+                }
+            }
+            FileFault::Corruption {
+                probability: p,
+                from_ms,
+                to_ms,
+            } => {
+                window(from_ms, to_ms)?;
+                Fault::Corruption {
+                    probability: probability(p)?,
+                    from_ms,
+                    to_ms,
+                }
+            }
+            FileFault::Delay {
+                delay_us,
+                from_ms,
+                to_ms,
+            } => {
+                window(from_ms, to_ms)?;
+                Fault::Delay {
+                    delay_us,
+                    from_ms,
+                    to_ms,
+                }
+            }
+            FileFault::BusOff { from_ms, to_ms } => {
+                window(from_ms, to_ms)?;
+                Fault::BusOff { from_ms, to_ms }
+            }
+        });
+    }
+    let mut bus = BusConfig::DEFAULT;
+    if let Some(b) = file.bitrate_bps {
+        if b == 0 {
+            return Err(invalid("bitrate_bps".into(), "must be positive"));
+        }
+        bus.bitrate_bps = b;
+    }
+    Ok(Scenario {
+        name: file.name,
+        description: file.description,
+        duration_ms: file.duration_ms,
+        seed: file.seed,
+        motors,
+        targets,
+        faults,
+        bus,
+    })
+}
+
+fn pid_config(field: String, pid: &FilePid, default_limit: f32) -> Result<PidConfig, FileError> {
+    let mut c = PidConfig::new(pid.kp, pid.ki, pid.kd)
+        .with_output_limit(pid.output_limit.unwrap_or(default_limit));
+    if let Some(l) = pid.integral_limit {
+        c = c.with_integral_limit(l);
+    }
+    c.validate().map_err(|e| invalid(field, e.to_string()))?;
+    Ok(c)
+}
+
+fn motor_spec(n: usize, m: &FileMotor) -> Result<MotorSpec, FileError> {
+    let model = match m.model {
+        FileModel::M3508 => DjiModel::M3508,
+        FileModel::M2006 => DjiModel::M2006,
+        FileModel::Gm6020Voltage => DjiModel::Gm6020Voltage,
+        FileModel::Gm6020Current => DjiModel::Gm6020Current,
+    };
+    if model.command_slot(m.id).is_none() {
+        return Err(invalid(
+            format!("motor[{n}].id"),
+            format!(
+                "{} is not an ESC id of this model (1 to {})",
+                m.id,
+                model.max_id()
+            ),
+        ));
+    }
+    let l = m.load;
+    if !(l.inertia_kg_m2.is_finite() && l.inertia_kg_m2 >= 0.0) || !l.torque_nm.is_finite() {
+        return Err(invalid(
+            format!("motor[{n}].load"),
+            "inertia must be ≥ 0 and torques finite",
+        ));
+    }
+    let load = Load {
+        inertia_kg_m2: l.inertia_kg_m2,
+        torque_nm: l.torque_nm,
+        step: l.step.map(|s| (s.at_ms * 1000, s.torque_nm)),
+    };
+    let tuned = m.speed_pid.is_some() || m.angle_pid.is_some() || m.angle_divider.is_some();
+    let controller = match m.controller {
+        FileController::Rc10lib => {
+            if model != DjiModel::M3508 {
+                return Err(invalid(
+                    format!("motor[{n}].controller"),
+                    "rc10lib (RC10_LIB's demo loop) exists for the m3508 only",
+                ));
+            }
+            if tuned {
+                return Err(invalid(
+                    format!("motor[{n}].controller"),
+                    "rc10lib uses RC10_LIB's fixed gains: remove speed_pid/angle_pid/angle_divider",
+                ));
+            }
+            Controller::Rc10Legacy
+        }
+        FileController::Rc10 if !tuned => Controller::Rc10,
+        FileController::Rc10 => {
+            let mut cfg = DjiConfig::default_for(model);
+            if let Some(p) = &m.speed_pid {
+                cfg.cascade.speed =
+                    pid_config(format!("motor[{n}].speed_pid"), p, model.max_command())?;
+            }
+            if let Some(p) = &m.angle_pid {
+                cfg.cascade.angle = pid_config(format!("motor[{n}].angle_pid"), p, f32::INFINITY)?;
+            }
+            if let Some(d) = m.angle_divider {
+                cfg.cascade.angle_divider = d;
+            }
+            Controller::Rc10With(cfg)
+        }
+    };
+    Ok(MotorSpec {
+        model,
+        esc_id: m.id,
+        load,
+        controller,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = r#"
+        name = "t"
+        duration_ms = 100
+        [[motor]]
+        model = "m3508"
+        id = 1
+        [[target]]
+        motor = 1
+        kind = "rpm"
+        steps = [[0, 100.0]]
+    "#;
+
+    #[test]
+    fn minimal_file_parses_with_defaults() {
+        let s = parse(MINIMAL).unwrap();
+        assert_eq!(s.seed, 1);
+        assert_eq!(s.motors[0].controller, Controller::Rc10);
+        assert_eq!(s.targets[0].motor, 0);
+        assert_eq!(s.bus, BusConfig::DEFAULT);
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let text = MINIMAL.replace("id = 1", "id = 1\nkpp = 3");
+        let e = parse(&text).unwrap_err().to_string();
+        assert!(e.contains("kpp"), "{e}");
+    }
+
+    #[test]
+    fn unknown_model_lists_the_known_ones() {
+        let text = MINIMAL.replace("\"m3508\"", "\"m3509\"");
+        let e = parse(&text).unwrap_err().to_string();
+        assert!(e.contains("m3509") && e.contains("gm6020-voltage"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_the_field() {
+        let bad_id = MINIMAL.replace("id = 1", "id = 9");
+        assert_eq!(
+            parse(&bad_id).unwrap_err(),
+            FileError::Invalid {
+                field: "motor[1].id".into(),
+                problem: "9 is not an ESC id of this model (1 to 8)".into()
+            }
+        );
+        let bad_target = MINIMAL.replace("motor = 1", "motor = 2");
+        assert!(matches!(
+            parse(&bad_target).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "target[1].motor"
+        ));
+        let bad_gain = MINIMAL.replace(
+            "id = 1",
+            "id = 1\nspeed_pid = { kp = 0.5, output_limit = -1.0 }",
+        );
+        assert!(matches!(
+            parse(&bad_gain).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "motor[1].speed_pid"
+        ));
+        let bad_fault = format!(
+            "{MINIMAL}\n[[fault]]\nkind = \"frame_loss\"\nprobability = 1.5\nfrom_ms = 0\nto_ms = 10\n"
+        );
+        assert!(matches!(
+            parse(&bad_fault).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "fault[1].probability"
+        ));
+    }
+
+    #[test]
+    fn gains_and_loads_are_applied() {
+        let text = MINIMAL.replace(
+            "id = 1",
+            "id = 1\nspeed_pid = { kp = 0.5, ki = 4.0 }\nangle_divider = 5\nload = { inertia_kg_m2 = 0.02, step = { at_ms = 50, torque_nm = 1.0 } }",
+        );
+        let s = parse(&text).unwrap();
+        let Controller::Rc10With(cfg) = s.motors[0].controller else {
+            panic!("expected tuned gains");
+        };
+        assert_eq!(cfg.cascade.speed.kp, 0.5);
+        assert_eq!(cfg.cascade.speed.output_limit, 20.0); // the ESC's range by default
+        assert_eq!(cfg.cascade.angle_divider, 5);
+        assert_eq!(s.motors[0].load.step, Some((50_000, 1.0)));
+    }
+}
