@@ -284,3 +284,56 @@ fn delayed_feedback_still_controls_within_targets() {
     let rising = r.samples.iter().find(|s| s.t_ms == 30).unwrap().motors[0];
     assert!(f64::from(rising.measured_rpm) < rising.true_rpm - 5.0);
 }
+
+#[test]
+fn stalled_receiver_overflows_the_three_deep_rx_fifo_and_counts_it() {
+    use rc10_sim::scenario::Fault;
+    // Two motors = two feedback frames per ms; a 5 ms stall brings ~10 frames: 3 fit.
+    let mut s = scenario("fault-power-cut");
+    s.faults = vec![Fault::RxStall {
+        from_ms: 200,
+        to_ms: 205,
+    }];
+    let r = run(&s).unwrap();
+    assert!((6..=8).contains(&r.rx_overruns), "{}", r.rx_overruns);
+    assert_eq!(u64::from(r.counters.rx_overruns), r.rx_overruns);
+    // A 5 ms gap is far below the offline timeout: nobody went offline.
+    assert_eq!(r.offline_events, vec![0, 0]);
+}
+
+#[test]
+fn m2006_speed_step_meets_the_control_targets_with_default_gains() {
+    let r = run(&scenario("m2006-speed-step")).unwrap();
+    let m = r.metrics[0].metrics;
+    let min = min_speed_rise_time_s(MotorParams::m2006(), Load::default(), 300.0).unwrap();
+    assert!(m.rise_time_s.unwrap() <= 1.5 * min);
+    assert!(m.overshoot_percent <= 5.0, "{}", m.overshoot_percent);
+    assert!(
+        m.settling_time_s.unwrap() <= 0.100,
+        "{:?}",
+        m.settling_time_s
+    );
+    assert!(m.steady_state_error <= 1.0);
+}
+
+#[test]
+fn gm6020_current_mode_gimbal_holds_angle_with_default_gains() {
+    let mut s = scenario("gm6020-gimbal");
+    s.motors[0].model = DjiModel::Gm6020Current;
+    let r = run(&s).unwrap();
+    let series = motor_series(&r, 0);
+    let overshoot = series
+        .iter()
+        .filter(|(t, _)| *t < 400)
+        .map(|(_, m)| m.true_total_deg - 90.0)
+        .fold(f64::MIN, f64::max);
+    assert!(overshoot < 1.0, "{overshoot}");
+    let worst = series
+        .iter()
+        .filter(|(t, _)| *t >= 400)
+        .map(|(_, m)| (m.true_total_deg - 90.0).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1.5, "{worst}");
+    // The current command never exceeds the GM6020's 3 A range.
+    assert!(series.iter().all(|(_, m)| m.command.abs() <= 3.0));
+}

@@ -22,7 +22,7 @@
 //! steps = [[10, 90.0]]            # [time in ms, value]
 //!
 //! [[fault]]
-//! kind = "power_cut"  # power_cut | stall | over_temperature | frame_loss | corruption | delay | bus_off
+//! kind = "power_cut"  # power_cut | stall | over_temperature | frame_loss | corruption | delay | bus_off | rx_stall
 //! motor = 1
 //! from_ms = 300
 //! to_ms = 500
@@ -211,6 +211,10 @@ enum FileFault {
         from_ms: u64,
         to_ms: u64,
     },
+    RxStall {
+        from_ms: u64,
+        to_ms: u64,
+    },
 }
 
 fn invalid(field: String, problem: impl Into<String>) -> FileError {
@@ -377,6 +381,10 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
             FileFault::BusOff { from_ms, to_ms } => {
                 window(from_ms, to_ms)?;
                 Fault::BusOff { from_ms, to_ms }
+            }
+            FileFault::RxStall { from_ms, to_ms } => {
+                window(from_ms, to_ms)?;
+                Fault::RxStall { from_ms, to_ms }
             }
         });
     }

@@ -79,8 +79,8 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
     );
     let _ = writeln!(
         s,
-        "faults    frames lost {}, device TX drops {}",
-        result.bus.lost, result.bus.device_tx_dropped
+        "faults    frames lost {}, RX FIFO overruns {}, device TX drops {}",
+        result.bus.lost, result.rx_overruns, result.bus.device_tx_dropped
     );
     s
 }

@@ -13,7 +13,7 @@ use crate::plant::{DjiEsc, Load, MotorParams};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{Rng, SeedableRng};
 use rc10_core::bus::{BusBuilder, BusConfig, FrameBudget, RegisterError};
-use rc10_core::can::{BusCounters, CanFrame};
+use rc10_core::can::{BusCounters, CanFrame, ReceiveError};
 use rc10_core::math::wrap_deg_180;
 use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
 use rc10_core::motor::{Motor, TargetError};
@@ -115,6 +115,15 @@ pub enum Fault {
     Delay {
         /// Extra latency, µs.
         delay_us: u64,
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+    /// The controller's receive path (its RX interrupt) is blocked in `[from_ms, to_ms)`:
+    /// frames wait in the 3-deep RX FIFO, later ones are dropped and reported to rc10 as
+    /// overruns, and the FIFO drains when the stall ends.
+    RxStall {
         /// Start, ms.
         from_ms: u64,
         /// End, ms.
@@ -259,6 +268,8 @@ pub struct RunResult {
     pub budget: FrameBudget,
     /// Offline events per motor, as rc10 counted them.
     pub offline_events: Vec<u32>,
+    /// Frames dropped because the controller's RX FIFO was full.
+    pub rx_overruns: u64,
     /// Step metrics per stepped target.
     pub metrics: Vec<TargetMetrics>,
 }
@@ -308,6 +319,8 @@ fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
 }
 
 const PLANT_STEP_US: u64 = 200;
+/// RX FIFO depth of an STM32G4 FDCAN (each of its two FIFOs holds 3 frames).
+const RX_FIFO_DEPTH: usize = 3;
 const TICK_US: u64 = 1000;
 
 /// Runs `scenario` and returns its trace and figures. Same scenario, same result, always.
@@ -368,6 +381,9 @@ pub fn run_with_progress(
     let mut next_step = vec![0usize; scenario.targets.len()];
     // Frames on their way to the controller under a delay fault: (arrival µs, frame).
     let mut delayed: std::collections::VecDeque<(u64, CanFrame)> = Default::default();
+    // The controller's RX FIFO while its receive path is stalled.
+    let mut rx_fifo: std::collections::VecDeque<CanFrame> = Default::default();
+    let mut rx_overruns = 0u64;
 
     loop {
         let mut t = next_plant.min(next_tick);
@@ -389,12 +405,27 @@ pub fn run_with_progress(
         if let Some((sender, frame)) = bus.complete(t) {
             let to_mcu = deliver(scenario, &mut rng, &mut bus, &mut escs, sender, frame, t_ms);
             if let Some(frame) = to_mcu {
-                match delay_us(scenario, t_ms) {
-                    0 => {
-                        rc10.dispatch(&frame, Instant::from_micros(t));
+                if rx_stalled(scenario, t_ms) {
+                    if rx_fifo.len() < RX_FIFO_DEPTH {
+                        rx_fifo.push_back(frame);
+                    } else {
+                        rx_overruns += 1;
+                        rc10.record_receive_error(ReceiveError::Overrun);
                     }
-                    d => delayed.push_back((t + d, frame)),
+                } else {
+                    match delay_us(scenario, t_ms) {
+                        0 => {
+                            rc10.dispatch(&frame, Instant::from_micros(t));
+                        }
+                        d => delayed.push_back((t + d, frame)),
+                    }
                 }
+            }
+        }
+        if !rx_stalled(scenario, t_ms) {
+            // The receive path runs again: the FIFO drains now, in order.
+            while let Some(frame) = rx_fifo.pop_front() {
+                rc10.dispatch(&frame, Instant::from_micros(t));
             }
         }
         while let Some(&(d, frame)) = delayed.front() {
@@ -491,6 +522,7 @@ pub fn run_with_progress(
         counters: rc10.stats().snapshot(),
         budget: rc10.budget(),
         offline_events: motors.iter().map(|m| m.state().offline_events).collect(),
+        rx_overruns,
         metrics,
         samples,
     })
@@ -498,6 +530,14 @@ pub fn run_with_progress(
 
 fn in_window(t_ms: u64, from_ms: u64, to_ms: u64) -> bool {
     (from_ms..to_ms).contains(&t_ms)
+}
+
+/// Whether the controller's receive path is stalled at `t_ms`.
+fn rx_stalled(scenario: &Scenario, t_ms: u64) -> bool {
+    scenario
+        .faults
+        .iter()
+        .any(|f| matches!(*f, Fault::RxStall { from_ms, to_ms } if in_window(t_ms, from_ms, to_ms)))
 }
 
 /// The receive delay in force at `t_ms`, µs.
@@ -687,6 +727,18 @@ pub fn builtin() -> Vec<Scenario> {
                 "m3508-speed-step-rc10lib",
                 "the same step with RC10_LIB's demo speed loop, for comparison (3 s: it is slow)",
                 3000,
+            )
+        },
+        Scenario {
+            motors: vec![MotorSpec {
+                model: DjiModel::M2006,
+                ..m3508(1, Controller::Rc10)
+            }],
+            targets: vec![speed_step(0)],
+            ..base(
+                "m2006-speed-step",
+                "unloaded M2006, speed step 0 -> 300 rpm with rc10's default gains",
+                400,
             )
         },
         Scenario {

@@ -139,8 +139,9 @@ pub struct DjiConfig {
     pub origin: Origin,
 }
 
-/// Default gains, tuned against the physical plants in rc10-sim (M3508 and GM6020 voltage
-/// mode; the M2006 and GM6020 current-mode gains are scaled from those and not yet tuned).
+/// Default gains, tuned against the physical plants in rc10-sim: speed steps for the M3508
+/// and M2006, a 0.01 kg·m² gimbal for the GM6020 (a bare GM6020 is too fast for any 1 kHz loop
+/// with a millisecond of feedback delay; it is always used with a load).
 impl DjiConfig {
     /// Defaults for `model`: speed loop with the ESC's full command range, angle loop limited
     /// to a speed the motor reaches, angle loop every 10th tick (RC10_LIB), thermal derating
@@ -155,8 +156,10 @@ impl DjiConfig {
                 PidConfig::new(0.6, 8.0, 0.0),
                 PidConfig::new(8.0, 0.0, 0.0).with_output_limit(400.0),
             ),
+            // Tuned in rc10-sim (`m2006-speed-step`): rises at the full-current minimum,
+            // no visible overshoot, settles in 81 ms.
             DjiModel::M2006 => (
-                PidConfig::new(0.15, 8.0, 0.0),
+                PidConfig::new(0.5, 4.0, 0.0),
                 PidConfig::new(8.0, 0.0, 0.0).with_output_limit(400.0),
             ),
             // Volts per rpm. Tuned in rc10-sim (`gm6020-gimbal`, 0.01 kg·m² load): a 90° step
@@ -165,9 +168,10 @@ impl DjiConfig {
                 PidConfig::new(0.8, 20.0, 0.0),
                 PidConfig::new(3.0, 0.0, 0.0).with_output_limit(250.0),
             ),
-            // The voltage-mode gains divided by the 8.7 Ω effective winding resistance.
+            // Amps per rpm. Tuned in rc10-sim on the same gimbal: no overshoot, ±0.6° under
+            // the load step.
             DjiModel::Gm6020Current => (
-                PidConfig::new(0.09, 2.3, 0.0),
+                PidConfig::new(0.15, 5.0, 0.0),
                 PidConfig::new(3.0, 0.0, 0.0).with_output_limit(250.0),
             ),
         };
