@@ -17,7 +17,7 @@ use rc10_core::can::{CanFrame, IdFilter};
 use rc10_core::encoder::GearRatio;
 use rc10_core::math::saturate;
 use rc10_core::motor::dji::DjiMotor;
-use rc10_core::motor::{ControlMode, HealthConfig, Motor, MotorState, TargetError};
+use rc10_core::motor::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
 use rc10_core::node::{BusUsage, CanNode, FrameError, TxBatch};
 use rc10_core::pid::{IncrementalPid, IncrementalPidConfig};
 use rc10_core::time::Instant;
@@ -34,7 +34,7 @@ struct MyState {
     target: f32,
     speed_rpm: f32,
     current_amps: f32,
-    last_feedback: Option<Instant>,
+    liveness: Liveness,
     command_amps: f32,
     speed_pid: IncrementalPid,
 }
@@ -61,7 +61,7 @@ impl MyMotor {
                 target: 0.0,
                 speed_rpm: 0.0,
                 current_amps: 0.0,
-                last_feedback: None,
+                liveness: Liveness::NEW,
                 command_amps: 0.0,
                 speed_pid: pid,
             })),
@@ -104,7 +104,7 @@ impl CanNode for MyMotor {
             let mut s = s.borrow_mut();
             s.speed_rpm = f32::from(i16::from_be_bytes([r0, r1])) / GEAR.as_f32();
             s.current_amps = f32::from(i16::from_be_bytes([c0, c1])) / 1000.0;
-            s.last_feedback = Some(now);
+            s.liveness.record_feedback(now);
         });
         Ok(())
     }
@@ -112,7 +112,8 @@ impl CanNode for MyMotor {
     fn update(&self, now: Instant, dt_s: f32) {
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
-            s.command_amps = if !self.health.is_online(s.last_feedback, now) {
+            s.liveness.check(&self.health, now);
+            s.command_amps = if !s.liveness.is_online() {
                 0.0
             } else {
                 match s.mode {
@@ -157,13 +158,14 @@ impl Motor for MyMotor {
         self.state.lock(|s| {
             let s = s.borrow();
             MotorState {
-                online: s.last_feedback.is_some(),
+                online: s.liveness.is_online(),
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.speed_rpm,
                 current_amps: Some(s.current_amps),
                 command: s.command_amps,
-                last_feedback: s.last_feedback,
+                last_feedback: s.liveness.last_feedback(),
+                offline_events: s.liveness.offline_events(),
                 ..MotorState::default()
             }
         })
@@ -215,6 +217,7 @@ fn user_motor_shares_the_bus_with_a_dji_motor() {
         ]
     );
 
+    assert!(MY.is_online());
     // The user motor's speed loop runs in update(): below target → positive current.
     MY.set_target_rpm(50.0).unwrap();
     bus.tick(t0, 0.001, &mut batch);
@@ -223,4 +226,11 @@ fn user_motor_shares_the_bus_with_a_dji_motor() {
     let short = CanFrame::standard(0x383, &[1, 2]).unwrap();
     assert!(matches!(bus.dispatch(&short, t0), Dispatch::Rejected(1, _)));
     assert_eq!(bus.stats().snapshot().rx_rejected, 1);
+    // Silence beyond the timeout: offline, zero command, like rc10's own drivers.
+    let later = Instant::from_millis(500);
+    bus.tick(later, 0.001, &mut batch);
+    assert!(!MY.is_online());
+    assert_eq!(MY.state().offline_events, 1);
+    let mine = batch.frames().iter().find(|f| f.raw_id() == 0x303).unwrap();
+    assert_eq!(mine.data(), &[0, 0]);
 }

@@ -24,7 +24,7 @@
 //! Positions are of the output shaft (the motor's driver accounts for its gearbox). The
 //! reported position wraps at ±`p_max`; this driver unwraps it into a multi-turn angle.
 
-use super::{ControlMode, HealthConfig, Motor, MotorState, TargetError};
+use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::GearRatio;
 use crate::math::{constrain, deg_to_rad, rad_to_deg, wrap_deg_360, wrap_signed};
@@ -291,9 +291,7 @@ struct DmState {
     torque_nm: f32,
     mos_temp_c: f32,
     rotor_temp_c: f32,
-    last_feedback: Option<Instant>,
-    online: bool,
-    offline_events: u32,
+    liveness: Liveness,
     torque_ff_nm: f32,
     out: [u8; 8],
 }
@@ -350,9 +348,7 @@ impl DmMotor {
                 torque_nm: 0.0,
                 mos_temp_c: 0.0,
                 rotor_temp_c: 0.0,
-                last_feedback: None,
-                online: false,
-                offline_events: 0,
+                liveness: Liveness::NEW,
                 torque_ff_nm: 0.0,
                 out: [0; 8],
             })),
@@ -501,7 +497,7 @@ impl CanNode for DmMotor {
             s.status = DmStatus::from_code(d[0] >> 4);
             s.mos_temp_c = f32::from(d[6]);
             s.rotor_temp_c = f32::from(d[7]);
-            s.last_feedback = Some(now);
+            s.liveness.record_feedback(now);
         });
         Ok(())
     }
@@ -510,11 +506,8 @@ impl CanNode for DmMotor {
         let health = self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
-            let online = health.is_online(s.last_feedback, now);
-            if s.online && !online {
-                s.offline_events = s.offline_events.wrapping_add(1);
-            }
-            s.online = online;
+            s.liveness.check(&health, now);
+            let online = s.liveness.is_online();
             let mit = if online {
                 self.mit_for(&s)
             } else {
@@ -574,7 +567,7 @@ impl Motor for DmMotor {
             let s = cell.borrow();
             let total_deg = rad_to_deg(s.total_position_rad(self.config.limits.p_max_rad));
             MotorState {
-                online: s.online,
+                online: s.liveness.is_online(),
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.velocity_rad_s * 60.0 / TAU,
@@ -583,8 +576,8 @@ impl Motor for DmMotor {
                 current_amps: None,
                 temperature_c: Some(s.rotor_temp_c.max(s.mos_temp_c)),
                 command: s.torque_ff_nm,
-                offline_events: s.offline_events,
-                last_feedback: s.last_feedback,
+                offline_events: s.liveness.offline_events(),
+                last_feedback: s.liveness.last_feedback(),
             }
         })
     }

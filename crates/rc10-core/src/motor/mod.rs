@@ -274,6 +274,56 @@ impl HealthConfig {
     }
 }
 
+/// Online/offline bookkeeping shared by the drivers: when feedback last arrived, whether the
+/// motor counts as online, and how often it went offline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Liveness {
+    last_feedback: Option<Instant>,
+    online: bool,
+    offline_events: u32,
+}
+
+impl Liveness {
+    /// Never heard from, offline.
+    pub const NEW: Self = Self {
+        last_feedback: None,
+        online: false,
+        offline_events: 0,
+    };
+
+    /// Records accepted feedback received at `now` (the motor is online from the next check).
+    pub fn record_feedback(&mut self, now: Instant) {
+        self.last_feedback = Some(now);
+    }
+
+    /// Re-evaluates at `now` under `health`; returns `true` exactly when the motor has just
+    /// gone offline (so the driver can zero its command and reset its loops once).
+    pub fn check(&mut self, health: &HealthConfig, now: Instant) -> bool {
+        let online = health.is_online(self.last_feedback, now);
+        let went_offline = self.online && !online;
+        if went_offline {
+            self.offline_events = self.offline_events.wrapping_add(1);
+        }
+        self.online = online;
+        went_offline
+    }
+
+    /// Whether the motor was online at the last check.
+    pub const fn is_online(&self) -> bool {
+        self.online
+    }
+
+    /// Times the motor went offline.
+    pub const fn offline_events(&self) -> u32 {
+        self.offline_events
+    }
+
+    /// When feedback last arrived.
+    pub const fn last_feedback(&self) -> Option<Instant> {
+        self.last_feedback
+    }
+}
+
 impl Default for HealthConfig {
     fn default() -> Self {
         Self::DEFAULT
@@ -295,6 +345,19 @@ mod tests {
         assert_eq!(t.derating(120.0), 0.0);
         assert_eq!(t.derating(150.0), 0.0);
         assert_eq!(t.derating(f32::NAN), 1.0);
+    }
+
+    #[test]
+    fn liveness_reports_going_offline_once_and_counts_it() {
+        let h = HealthConfig::DEFAULT;
+        let mut l = Liveness::NEW;
+        assert!(!l.check(&h, Instant::from_millis(0)));
+        l.record_feedback(Instant::from_millis(1));
+        assert!(!l.check(&h, Instant::from_millis(2)));
+        assert!(l.is_online());
+        assert!(l.check(&h, Instant::from_millis(200)));
+        assert!(!l.check(&h, Instant::from_millis(300)));
+        assert_eq!((l.is_online(), l.offline_events()), (false, 1));
     }
 
     #[test]

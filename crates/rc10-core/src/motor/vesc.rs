@@ -22,7 +22,7 @@
 //! `SET_RPM 0`. While offline or disabled the driver sends `SET_CURRENT 0`, which releases the
 //! motor.
 
-use super::{ControlMode, HealthConfig, Motor, MotorState, TargetError};
+use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::GearRatio;
 use crate::math::{saturate, wrap_deg_360};
@@ -168,9 +168,7 @@ struct VescState {
     duty: f32,
     fet_temp_c: Option<f32>,
     motor_temp_c: Option<f32>,
-    last_feedback: Option<Instant>,
-    online: bool,
-    offline_events: u32,
+    liveness: Liveness,
     command: VescCommand,
 }
 
@@ -230,9 +228,7 @@ impl VescMotor {
                 duty: 0.0,
                 fet_temp_c: None,
                 motor_temp_c: None,
-                last_feedback: None,
-                online: false,
-                offline_events: 0,
+                liveness: Liveness::NEW,
                 command: VescCommand::Current(0.0),
             })),
         })
@@ -349,7 +345,7 @@ impl CanNode for VescMotor {
                     s.erpm = erpm as f32;
                     s.current_amps = f32::from(current) / 10.0;
                     s.duty = f32::from(duty) / 1000.0;
-                    s.last_feedback = Some(now);
+                    s.liveness.record_feedback(now);
                 });
                 Ok(())
             }
@@ -376,12 +372,8 @@ impl CanNode for VescMotor {
         let health = self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
-            let online = health.is_online(s.last_feedback, now);
-            if s.online && !online {
-                s.offline_events = s.offline_events.wrapping_add(1);
-            }
-            s.online = online;
-            s.command = if online {
+            s.liveness.check(&health, now);
+            s.command = if s.liveness.is_online() {
                 self.command_for(&s)
             } else {
                 VescCommand::Current(0.0)
@@ -428,7 +420,7 @@ impl Motor for VescMotor {
         self.state.lock(|cell| {
             let s = cell.borrow();
             MotorState {
-                online: s.online,
+                online: s.liveness.is_online(),
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.erpm / self.config.erpm_per_rpm(),
@@ -441,8 +433,8 @@ impl Motor for VescMotor {
                     VescCommand::Brake(a) => -a,
                     _ => 0.0,
                 },
-                offline_events: s.offline_events,
-                last_feedback: s.last_feedback,
+                offline_events: s.liveness.offline_events(),
+                last_feedback: s.liveness.last_feedback(),
             }
         })
     }

@@ -25,7 +25,7 @@
 //! M3508 with id 5 and a GM6020 with id 1 both answer on 0x205).
 
 use super::cascade::{Cascade, CascadeConfig, Measured};
-use super::{ControlMode, HealthConfig, Motor, MotorState, TargetError, ThermalLimits};
+use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError, ThermalLimits};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::{Encoder, EncoderConfig, GearRatio, Origin};
 use crate::math::saturate;
@@ -232,10 +232,8 @@ struct DjiState {
     speed_rpm: f32,
     current_amps: f32,
     temperature_c: Option<f32>,
-    last_feedback: Option<Instant>,
-    online: bool,
+    liveness: Liveness,
     awaiting_return: bool,
-    offline_events: u32,
     command: f32,
 }
 
@@ -293,10 +291,8 @@ impl DjiMotor {
                 speed_rpm: 0.0,
                 current_amps: 0.0,
                 temperature_c: None,
-                last_feedback: None,
-                online: false,
+                liveness: Liveness::NEW,
                 awaiting_return: false,
-                offline_events: 0,
                 command: 0.0,
             })),
         })
@@ -408,7 +404,7 @@ impl DjiMotor {
             f32::from(raw_current) * (unit_fs / raw_fs)
         };
         s.temperature_c = self.model.reports_temperature().then_some(f32::from(d[6]));
-        s.last_feedback = Some(now);
+        s.liveness.record_feedback(now);
         Ok(())
     }
 }
@@ -438,14 +434,11 @@ impl CanNode for DjiMotor {
         let health = self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
-            let online = health.is_online(s.last_feedback, now);
-            if s.online && !online {
-                s.offline_events = s.offline_events.wrapping_add(1);
+            if s.liveness.check(&health, now) {
                 s.awaiting_return = true;
                 s.cascade.reset();
             }
-            s.online = online;
-            if !online {
+            if !s.liveness.is_online() {
                 s.command = 0.0;
                 return;
             }
@@ -504,7 +497,7 @@ impl Motor for DjiMotor {
         self.state.lock(|cell| {
             let s = cell.borrow();
             MotorState {
-                online: s.online,
+                online: s.liveness.is_online(),
                 mode: s.cascade.mode(),
                 target: s.cascade.target(),
                 speed_rpm: s.speed_rpm,
@@ -513,8 +506,8 @@ impl Motor for DjiMotor {
                 current_amps: Some(s.current_amps),
                 temperature_c: s.temperature_c,
                 command: s.command,
-                offline_events: s.offline_events,
-                last_feedback: s.last_feedback,
+                offline_events: s.liveness.offline_events(),
+                last_feedback: s.liveness.last_feedback(),
             }
         })
     }
