@@ -5,6 +5,7 @@
 
 pub mod bus;
 pub mod can;
+pub mod chassis;
 pub mod encoder;
 pub mod filter;
 pub mod geometry;

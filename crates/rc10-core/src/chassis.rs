@@ -1,0 +1,689 @@
+//! Chassis kinematics: robot twist ↔ wheel speeds for mecanum, omni and swerve drives, world ↔
+//! robot frames, acceleration limiting that keeps the direction of motion, wheel-speed
+//! saturation that scales all wheels together, and odometry (forward kinematics).
+//!
+//! Conventions: robot frame x forward, y left, z up; angles counter-clockwise positive, in
+//! radians; speeds in m/s and rad/s; wheel speeds are **output-shaft rpm** of each wheel's
+//! motor, positive when the wheel rolls the robot along its drive direction, times the wheel's
+//! mounting sign (motors on the right side of a chassis usually face the other way: give them
+//! sign −1 once, and the rest of your code never thinks about it).
+//!
+//! ```
+//! use rc10_core::chassis::{LinearChassis, MecanumConfig, Twist};
+//! // 0.4 m wheelbase, 0.36 m track, 76 mm wheels (RoboMaster standard chassis).
+//! let chassis = LinearChassis::mecanum(MecanumConfig::new(0.4, 0.36, 0.076)).unwrap();
+//! let rpm = chassis.wheel_rpm(Twist::new(1.0, 0.0, 0.0)); // 1 m/s forward
+//! // v / r = 1 / 0.076 rad/s = 125.65 rpm on every wheel.
+//! assert!(rpm.iter().all(|w| (w - 125.65).abs() < 0.01));
+//! let back = chassis.twist(&rpm);
+//! assert!((back.vx_m_s - 1.0).abs() < 1e-5);
+//! ```
+
+use crate::math::{saturate, wrap_rad_pi};
+use core::f32::consts::{PI, TAU};
+use core::fmt;
+use nalgebra::{Matrix3, SMatrix, Vector3};
+
+const RAD_S_TO_RPM: f32 = 60.0 / TAU;
+
+/// A planar velocity: linear in m/s, angular in rad/s.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Twist {
+    /// Velocity along x (forward), m/s.
+    pub vx_m_s: f32,
+    /// Velocity along y (left), m/s.
+    pub vy_m_s: f32,
+    /// Angular velocity about z (counter-clockwise), rad/s.
+    pub omega_rad_s: f32,
+}
+
+impl Twist {
+    /// A twist from its three components.
+    pub const fn new(vx_m_s: f32, vy_m_s: f32, omega_rad_s: f32) -> Self {
+        Self {
+            vx_m_s,
+            vy_m_s,
+            omega_rad_s,
+        }
+    }
+
+    /// Zero.
+    pub const ZERO: Self = Self::new(0.0, 0.0, 0.0);
+
+    /// The same motion written in a frame rotated by `yaw_rad` (counter-clockwise): turns a
+    /// world-frame command into the robot frame when `yaw_rad` is the robot's heading
+    /// (RC10_LIB Chassis_Base's world → robot conversion, for "field-centric" driving).
+    pub fn world_to_robot(self, yaw_rad: f32) -> Self {
+        let (s, c) = libm::sincosf(yaw_rad);
+        Self::new(
+            c * self.vx_m_s + s * self.vy_m_s,
+            -s * self.vx_m_s + c * self.vy_m_s,
+            self.omega_rad_s,
+        )
+    }
+
+    /// The inverse of [`world_to_robot`](Self::world_to_robot).
+    pub fn robot_to_world(self, yaw_rad: f32) -> Self {
+        self.world_to_robot(-yaw_rad)
+    }
+
+    fn is_finite(&self) -> bool {
+        self.vx_m_s.is_finite() && self.vy_m_s.is_finite() && self.omega_rad_s.is_finite()
+    }
+}
+
+/// Why a chassis geometry cannot be used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ChassisError {
+    /// A length is not finite and positive.
+    InvalidDimension,
+    /// The wheels cannot determine the twist (e.g. all omni wheels parallel).
+    Singular,
+}
+
+impl fmt::Display for ChassisError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::InvalidDimension => "chassis dimension not finite and positive",
+            Self::Singular => "wheel arrangement cannot determine the chassis twist",
+        })
+    }
+}
+
+impl core::error::Error for ChassisError {}
+
+fn positive(x: f32) -> Result<f32, ChassisError> {
+    if x.is_finite() && x > 0.0 {
+        Ok(x)
+    } else {
+        Err(ChassisError::InvalidDimension)
+    }
+}
+
+/// How the mecanum rollers are arranged, seen from above.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MecanumRollers {
+    /// The common arrangement: the rollers touching the ground form an "O" seen from above
+    /// (an "X" when the chassis is turned over). Strafing left spins front-left backwards.
+    #[default]
+    O,
+    /// The mirrored arrangement (rollers form an "X" from above).
+    X,
+}
+
+/// A four-wheel mecanum chassis; wheels in the order front-left, front-right, rear-left,
+/// rear-right.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MecanumConfig {
+    /// Distance between front and rear axles, m.
+    pub wheelbase_m: f32,
+    /// Distance between left and right wheel centres, m.
+    pub track_m: f32,
+    /// Wheel radius, m.
+    pub wheel_radius_m: f32,
+    /// Roller arrangement.
+    pub rollers: MecanumRollers,
+    /// Per-wheel motor sign (FL, FR, RL, RR): −1 for motors mounted mirrored.
+    pub wheel_signs: [f32; 4],
+}
+
+impl MecanumConfig {
+    /// O rollers, all motors with sign +1.
+    pub const fn new(wheelbase_m: f32, track_m: f32, wheel_radius_m: f32) -> Self {
+        Self {
+            wheelbase_m,
+            track_m,
+            wheel_radius_m,
+            rollers: MecanumRollers::O,
+            wheel_signs: [1.0; 4],
+        }
+    }
+
+    /// Sets [`wheel_signs`](Self::wheel_signs).
+    #[must_use]
+    pub const fn with_wheel_signs(mut self, signs: [f32; 4]) -> Self {
+        self.wheel_signs = signs;
+        self
+    }
+
+    /// Sets [`rollers`](Self::rollers).
+    #[must_use]
+    pub const fn with_rollers(mut self, rollers: MecanumRollers) -> Self {
+        self.rollers = rollers;
+        self
+    }
+}
+
+/// A chassis whose wheel rim speeds are linear in the twist: mecanum and omni wheels.
+///
+/// Wheel `i`'s rim speed (m/s) is `rows[i] · (vx, vy, ω)`; its motor turns at
+/// `sign[i] · rim / r` (converted to rpm). Odometry uses the least-squares inverse, computed
+/// once at construction, so a slipping wheel pulls the estimate only by its share.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearChassis<const N: usize> {
+    rows: SMatrix<f32, N, 3>,
+    pseudo_inverse: SMatrix<f32, 3, N>,
+    wheel_radius_m: f32,
+    signs: [f32; N],
+}
+
+impl<const N: usize> LinearChassis<N> {
+    /// A chassis from explicit rows `[kx, ky, kω]` (rim speed = kx·vx + ky·vy + kω·ω),
+    /// wheel radius and per-wheel signs.
+    pub fn from_rows(
+        rows: [[f32; 3]; N],
+        wheel_radius_m: f32,
+        signs: [f32; N],
+    ) -> Result<Self, ChassisError> {
+        let r = positive(wheel_radius_m)?;
+        if rows.iter().flatten().chain(&signs).any(|x| !x.is_finite()) {
+            return Err(ChassisError::InvalidDimension);
+        }
+        let m = SMatrix::<f32, N, 3>::from_fn(|i, j| {
+            rows.get(i)
+                .and_then(|row| row.get(j))
+                .copied()
+                .unwrap_or(0.0)
+        });
+        let normal: Matrix3<f32> = m.transpose() * m;
+        let inverse = normal.try_inverse().ok_or(ChassisError::Singular)?;
+        Ok(Self {
+            rows: m,
+            pseudo_inverse: inverse * m.transpose(),
+            wheel_radius_m: r,
+            signs,
+        })
+    }
+
+    /// Output-shaft rpm of every wheel for `twist`. A non-finite twist gives all zeros.
+    pub fn wheel_rpm(&self, twist: Twist) -> [f32; N] {
+        let mut out = [0.0; N];
+        if !twist.is_finite() {
+            return out;
+        }
+        let v = Vector3::new(twist.vx_m_s, twist.vy_m_s, twist.omega_rad_s);
+        let rim = self.rows * v;
+        for ((o, rim), sign) in out.iter_mut().zip(rim.iter()).zip(&self.signs) {
+            *o = sign * rim / self.wheel_radius_m * RAD_S_TO_RPM;
+        }
+        out
+    }
+
+    /// Like [`wheel_rpm`](Self::wheel_rpm), but if any wheel would exceed `max_rpm` all are
+    /// scaled down together, so the robot keeps its direction and curvature and only slows.
+    pub fn wheel_rpm_limited(&self, twist: Twist, max_rpm: f32) -> [f32; N] {
+        let mut rpm = self.wheel_rpm(twist);
+        scale_to_limit(&mut rpm, max_rpm);
+        rpm
+    }
+
+    /// The twist the wheels produce (odometry): least squares over all wheels. Non-finite
+    /// wheel speeds give [`Twist::ZERO`].
+    pub fn twist(&self, wheel_rpm: &[f32; N]) -> Twist {
+        if wheel_rpm.iter().any(|w| !w.is_finite()) {
+            return Twist::ZERO;
+        }
+        let rim = SMatrix::<f32, N, 1>::from_fn(|i, _| {
+            let w = wheel_rpm.get(i).copied().unwrap_or(0.0);
+            let s = self.signs.get(i).copied().unwrap_or(1.0);
+            s * w / RAD_S_TO_RPM * self.wheel_radius_m
+        });
+        let t = self.pseudo_inverse * rim;
+        Twist::new(t.x, t.y, t.z)
+    }
+}
+
+impl LinearChassis<4> {
+    /// A mecanum chassis (wheels FL, FR, RL, RR).
+    ///
+    /// Wheel `i` at `(xᵢ, yᵢ)` with roller sign `sᵢ` has rim speed
+    /// `vx − ω·yᵢ + sᵢ·(vy + ω·xᵢ)`: for O rollers `s = (−1, +1, +1, −1)`, which gives the
+    /// familiar `vx ∓ vy ∓ (a + b)·ω` with `a`, `b` half the wheelbase and track.
+    pub fn mecanum(config: MecanumConfig) -> Result<Self, ChassisError> {
+        let a = positive(config.wheelbase_m)? / 2.0;
+        let b = positive(config.track_m)? / 2.0;
+        let s = match config.rollers {
+            MecanumRollers::O => [-1.0, 1.0, 1.0, -1.0],
+            MecanumRollers::X => [1.0, -1.0, -1.0, 1.0],
+        };
+        let pos = [(a, b), (a, -b), (-a, b), (-a, -b)];
+        let mut rows = [[0.0; 3]; 4];
+        for ((row, (x, y)), s) in rows.iter_mut().zip(pos).zip(s) {
+            *row = [1.0, s, s * x - y];
+        }
+        Self::from_rows(rows, config.wheel_radius_m, config.wheel_signs)
+    }
+}
+
+/// An omni chassis of `N` wheels evenly spaced on a circle of radius `center_to_wheel_m`, the
+/// first at `first_wheel_angle_rad` from the robot's x axis, counting counter-clockwise, each
+/// driving tangentially (counter-clockwise positive). Three wheels at 90°, 210°, 330° or four at
+/// 45°, 135°, 225°, 315° are the usual layouts.
+///
+/// ```
+/// use core::f32::consts::FRAC_PI_4;
+/// use rc10_core::chassis::{omni, Twist};
+/// let chassis = omni::<4>(0.25, 0.05, FRAC_PI_4).unwrap();
+/// let rpm = chassis.wheel_rpm(Twist::new(0.0, 0.0, 1.0)); // spin at 1 rad/s
+/// // Every wheel's rim moves at R·ω = 0.25 m/s: 0.25 / 0.05 rad/s = 47.75 rpm.
+/// assert!(rpm.iter().all(|w| (w - 47.75).abs() < 0.01));
+/// ```
+pub fn omni<const N: usize>(
+    center_to_wheel_m: f32,
+    wheel_radius_m: f32,
+    first_wheel_angle_rad: f32,
+) -> Result<LinearChassis<N>, ChassisError> {
+    let radius = positive(center_to_wheel_m)?;
+    if !first_wheel_angle_rad.is_finite() {
+        return Err(ChassisError::InvalidDimension);
+    }
+    let mut rows = [[0.0; 3]; N];
+    for (i, row) in rows.iter_mut().enumerate() {
+        let theta = first_wheel_angle_rad + TAU * i as f32 / N as f32;
+        let (s, c) = libm::sincosf(theta);
+        // Tangential drive direction (−sin θ, cos θ) at (R cos θ, R sin θ).
+        *row = [-s, c, radius];
+    }
+    LinearChassis::from_rows(rows, wheel_radius_m, [1.0; N])
+}
+
+/// Scales all values down together so none exceeds `max` in magnitude.
+fn scale_to_limit(values: &mut [f32], max: f32) {
+    let limit = if max.is_nan() { 0.0 } else { max.abs() };
+    let peak = values.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    if peak > limit && peak > 0.0 {
+        let k = limit / peak;
+        values.iter_mut().for_each(|v| *v *= k);
+    }
+}
+
+/// One swerve module's command.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModuleState {
+    /// Steering angle in radians, (−π, π], relative to the robot's x axis.
+    pub steer_rad: f32,
+    /// Wheel output-shaft rpm (negative: the wheel runs backwards).
+    pub wheel_rpm: f32,
+}
+
+/// A four-module swerve chassis; modules front-left, front-right, rear-left, rear-right.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Swerve {
+    positions: [(f32, f32); 4],
+    wheel_radius_m: f32,
+    pseudo_inverse: SMatrix<f32, 3, 8>,
+}
+
+impl Swerve {
+    /// Modules at the corners of a `wheelbase_m` × `track_m` rectangle.
+    pub fn new(wheelbase_m: f32, track_m: f32, wheel_radius_m: f32) -> Result<Self, ChassisError> {
+        let a = positive(wheelbase_m)? / 2.0;
+        let b = positive(track_m)? / 2.0;
+        let r = positive(wheel_radius_m)?;
+        let positions = [(a, b), (a, -b), (-a, b), (-a, -b)];
+        // Module velocity: (vx − ω·y, vy + ω·x) — eight linear equations in (vx, vy, ω).
+        let m = SMatrix::<f32, 8, 3>::from_fn(|row, col| {
+            let (x, y) = positions.get(row / 2).copied().unwrap_or((0.0, 0.0));
+            match (row % 2, col) {
+                (0, 0) | (1, 1) => 1.0,
+                (0, 2) => -y,
+                (1, 2) => x,
+                _ => 0.0,
+            }
+        });
+        let inverse = (m.transpose() * m)
+            .try_inverse()
+            .ok_or(ChassisError::Singular)?;
+        Ok(Self {
+            positions,
+            wheel_radius_m: r,
+            pseudo_inverse: inverse * m.transpose(),
+        })
+    }
+
+    /// Module commands for `twist`, steering each module the shortest way from `current`
+    /// (reversing the wheel instead of turning more than 90°). A module whose speed is zero
+    /// keeps its present angle (no snapping back to 0 when the robot stops); a non-finite
+    /// twist stops all wheels at their present angles.
+    pub fn modules(&self, twist: Twist, current: &[ModuleState; 4]) -> [ModuleState; 4] {
+        let mut out = *current;
+        for ((o, (x, y)), now) in out.iter_mut().zip(&self.positions).zip(current) {
+            o.wheel_rpm = 0.0;
+            if !twist.is_finite() {
+                continue;
+            }
+            let vx = twist.vx_m_s - twist.omega_rad_s * y;
+            let vy = twist.vy_m_s + twist.omega_rad_s * x;
+            let speed = libm::hypotf(vx, vy);
+            if speed < 1e-6 {
+                continue;
+            }
+            let mut angle = libm::atan2f(vy, vx);
+            let mut rpm = speed / self.wheel_radius_m * RAD_S_TO_RPM;
+            if wrap_rad_pi(angle - now.steer_rad).abs() > PI / 2.0 {
+                angle = wrap_rad_pi(angle + PI);
+                rpm = -rpm;
+            }
+            o.steer_rad = if angle <= -PI { angle + TAU } else { angle };
+            o.wheel_rpm = rpm;
+        }
+        out
+    }
+
+    /// Like [`modules`](Self::modules), scaling all wheel speeds together to at most `max_rpm`.
+    pub fn modules_limited(
+        &self,
+        twist: Twist,
+        current: &[ModuleState; 4],
+        max_rpm: f32,
+    ) -> [ModuleState; 4] {
+        let mut m = self.modules(twist, current);
+        let mut rpm = m.map(|s| s.wheel_rpm);
+        scale_to_limit(&mut rpm, max_rpm);
+        for (s, r) in m.iter_mut().zip(rpm) {
+            s.wheel_rpm = r;
+        }
+        m
+    }
+
+    /// The twist measured module states produce (odometry, least squares).
+    pub fn twist(&self, modules: &[ModuleState; 4]) -> Twist {
+        if modules
+            .iter()
+            .any(|m| !(m.steer_rad.is_finite() && m.wheel_rpm.is_finite()))
+        {
+            return Twist::ZERO;
+        }
+        let v = SMatrix::<f32, 8, 1>::from_fn(|row, _| {
+            let m = modules.get(row / 2).copied().unwrap_or_default();
+            let speed = m.wheel_rpm / RAD_S_TO_RPM * self.wheel_radius_m;
+            let (s, c) = libm::sincosf(m.steer_rad);
+            if row % 2 == 0 { speed * c } else { speed * s }
+        });
+        let t = self.pseudo_inverse * v;
+        Twist::new(t.x, t.y, t.z)
+    }
+}
+
+/// Limits how fast a commanded twist may change: each axis has its own acceleration limit, and
+/// when any axis is limited the whole change is scaled by the same factor, so the direction in
+/// which the command moves is kept (a diagonal push stays diagonal instead of sliding along
+/// whichever axis saturates first).
+///
+/// ```
+/// use rc10_core::chassis::{Twist, TwistLimiter};
+/// // 2 m/s² on each linear axis, 6 rad/s² in rotation.
+/// let mut limiter = TwistLimiter::new(Twist::new(2.0, 2.0, 6.0));
+/// let out = limiter.update(Twist::new(1.0, 0.5, 0.0), 0.1);
+/// // x may change by 0.2 m/s: the whole step is scaled by 0.2, so y changes by 0.1.
+/// assert!((out.vx_m_s - 0.2).abs() < 1e-6 && (out.vy_m_s - 0.1).abs() < 1e-6);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwistLimiter {
+    max_accel: Twist,
+    output: Twist,
+}
+
+impl TwistLimiter {
+    /// Limits per axis: m/s², m/s², rad/s² (taken by magnitude; NaN freezes that axis).
+    pub fn new(max_accel: Twist) -> Self {
+        let clean = |x: f32| if x.is_nan() { 0.0 } else { x.abs() };
+        Self {
+            max_accel: Twist::new(
+                clean(max_accel.vx_m_s),
+                clean(max_accel.vy_m_s),
+                clean(max_accel.omega_rad_s),
+            ),
+            output: Twist::ZERO,
+        }
+    }
+
+    /// Moves towards `target` for `dt_s` seconds; returns the limited twist. A non-finite
+    /// target or `dt_s` holds the output.
+    pub fn update(&mut self, target: Twist, dt_s: f32) -> Twist {
+        if !target.is_finite() || !dt_s.is_finite() || dt_s < 0.0 {
+            return self.output;
+        }
+        let d = [
+            target.vx_m_s - self.output.vx_m_s,
+            target.vy_m_s - self.output.vy_m_s,
+            target.omega_rad_s - self.output.omega_rad_s,
+        ];
+        let lim = [
+            self.max_accel.vx_m_s * dt_s,
+            self.max_accel.vy_m_s * dt_s,
+            self.max_accel.omega_rad_s * dt_s,
+        ];
+        let k = d
+            .iter()
+            .zip(lim)
+            .filter(|(d, _)| d.abs() > 0.0)
+            .map(|(d, l)| l / d.abs())
+            .fold(1.0f32, f32::min);
+        self.output = Twist::new(
+            self.output.vx_m_s + k * d[0],
+            self.output.vy_m_s + k * d[1],
+            self.output.omega_rad_s + k * d[2],
+        );
+        self.output
+    }
+
+    /// The present output.
+    pub const fn output(&self) -> Twist {
+        self.output
+    }
+
+    /// Sets the output (e.g. to the measured twist after a stop).
+    pub fn reset(&mut self, twist: Twist) {
+        if twist.is_finite() {
+            self.output = twist;
+        }
+    }
+}
+
+/// Clamps each axis of a twist to `±max` (m/s, m/s, rad/s): for commands from a remote.
+pub fn clamp_twist(twist: Twist, max: Twist) -> Twist {
+    Twist::new(
+        saturate(twist.vx_m_s, max.vx_m_s),
+        saturate(twist.vy_m_s, max.vy_m_s),
+        saturate(twist.omega_rad_s, max.omega_rad_s),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::f32::consts::FRAC_PI_2;
+    use proptest::prelude::*;
+
+    fn rm_chassis() -> LinearChassis<4> {
+        LinearChassis::mecanum(MecanumConfig::new(0.4, 0.36, 0.076)).unwrap()
+    }
+
+    fn rpm_of(rim_m_s: f32, r: f32) -> f32 {
+        rim_m_s / r * 60.0 / TAU
+    }
+
+    #[test]
+    fn mecanum_strafe_and_spin_match_hand_formula() {
+        let c = rm_chassis();
+        // Strafe left 1 m/s: FL −, FR +, RL +, RR − (O rollers).
+        let w = c.wheel_rpm(Twist::new(0.0, 1.0, 0.0));
+        let v = rpm_of(1.0, 0.076);
+        for (got, want) in w.iter().zip([-v, v, v, -v]) {
+            assert!((got - want).abs() < 1e-3, "{w:?}");
+        }
+        // Spin 1 rad/s: rim = ∓(a + b)·ω = ∓0.38 m/s: FL −, FR +, RL −, RR +.
+        let w = c.wheel_rpm(Twist::new(0.0, 0.0, 1.0));
+        let v = rpm_of(0.38, 0.076);
+        for (got, want) in w.iter().zip([-v, v, -v, v]) {
+            assert!((got - want).abs() < 1e-3, "{w:?}");
+        }
+    }
+
+    #[test]
+    fn x_rollers_mirror_the_strafe() {
+        let o = rm_chassis().wheel_rpm(Twist::new(0.0, 1.0, 0.0));
+        let x = LinearChassis::mecanum(
+            MecanumConfig::new(0.4, 0.36, 0.076).with_rollers(MecanumRollers::X),
+        )
+        .unwrap()
+        .wheel_rpm(Twist::new(0.0, 1.0, 0.0));
+        for (a, b) in o.iter().zip(x) {
+            assert!((a + b).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn wheel_signs_flip_mirrored_motors_both_ways() {
+        let signed = LinearChassis::mecanum(
+            MecanumConfig::new(0.4, 0.36, 0.076).with_wheel_signs([1.0, -1.0, 1.0, -1.0]),
+        )
+        .unwrap();
+        let rpm = signed.wheel_rpm(Twist::new(1.0, 0.0, 0.0));
+        assert!(rpm[0] > 0.0 && rpm[1] < 0.0);
+        let back = signed.twist(&rpm);
+        assert!((back.vx_m_s - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn omni3_forward_uses_front_wheels_only() {
+        // Wheels at 90°, 210°, 330°: the wheel at 90° (left side) drives along −x.
+        let c = omni::<3>(0.2, 0.05, FRAC_PI_2).unwrap();
+        let w = c.wheel_rpm(Twist::new(1.0, 0.0, 0.0));
+        // rim = −sin θ: −1, +0.5, +0.5 m/s.
+        for (got, want) in w.iter().zip([-1.0, 0.5, 0.5]) {
+            assert!((got - rpm_of(want, 0.05)).abs() < 1e-2, "{w:?}");
+        }
+    }
+
+    #[test]
+    fn saturation_scales_all_wheels_together() {
+        let c = rm_chassis();
+        let twist = Twist::new(3.0, 1.0, 2.0);
+        let free = c.wheel_rpm(twist);
+        let limited = c.wheel_rpm_limited(twist, 400.0);
+        let peak = limited.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!((peak - 400.0).abs() < 1e-2);
+        let k = limited[0] / free[0];
+        for (l, f) in limited.iter().zip(free) {
+            assert!((l - k * f).abs() < 1e-2, "ratios differ");
+        }
+        // The resulting twist points the same way, only slower.
+        let t = c.twist(&limited);
+        assert!((t.vy_m_s / t.vx_m_s - 1.0 / 3.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn world_to_robot_by_yaw() {
+        // Robot facing +y (yaw 90°): a world +y command is robot forward.
+        let t = Twist::new(0.0, 1.0, 0.5).world_to_robot(FRAC_PI_2);
+        assert!((t.vx_m_s - 1.0).abs() < 1e-6 && t.vy_m_s.abs() < 1e-6);
+        assert_eq!(t.omega_rad_s, 0.5);
+        let back = t.robot_to_world(FRAC_PI_2);
+        assert!(back.vx_m_s.abs() < 1e-6 && (back.vy_m_s - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn swerve_reverses_wheel_instead_of_turning_more_than_90_degrees() {
+        let s = Swerve::new(0.5, 0.5, 0.05).unwrap();
+        let forward = s.modules(Twist::new(1.0, 0.0, 0.0), &[ModuleState::default(); 4]);
+        assert!(
+            forward
+                .iter()
+                .all(|m| m.steer_rad.abs() < 1e-6 && m.wheel_rpm > 0.0)
+        );
+        // Now backwards: modules at 0 keep 0 and run the wheel in reverse.
+        let back = s.modules(Twist::new(-1.0, 0.0, 0.0), &forward);
+        assert!(
+            back.iter()
+                .all(|m| m.steer_rad.abs() < 1e-6 && m.wheel_rpm < 0.0)
+        );
+        // Left: turn 90°, not −90° with reversal (both are 90° away; not more than 90°).
+        let left = s.modules(Twist::new(0.0, 1.0, 0.0), &forward);
+        assert!(
+            left.iter()
+                .all(|m| (m.steer_rad - FRAC_PI_2).abs() < 1e-5 && m.wheel_rpm > 0.0)
+        );
+    }
+
+    #[test]
+    fn swerve_stopped_keeps_angles() {
+        let s = Swerve::new(0.5, 0.5, 0.05).unwrap();
+        let turned = s.modules(Twist::new(0.0, 1.0, 0.0), &[ModuleState::default(); 4]);
+        let stopped = s.modules(Twist::ZERO, &turned);
+        for (a, b) in stopped.iter().zip(&turned) {
+            assert_eq!(a.steer_rad, b.steer_rad);
+            assert_eq!(a.wheel_rpm, 0.0);
+        }
+    }
+
+    #[test]
+    fn limiter_keeps_direction_and_reaches_target() {
+        let mut l = TwistLimiter::new(Twist::new(1.0, 1.0, 1.0));
+        let mut out = Twist::ZERO;
+        for _ in 0..30 {
+            out = l.update(Twist::new(2.0, 1.0, 0.0), 0.1);
+            if out.vx_m_s > 0.0 {
+                assert!((out.vy_m_s / out.vx_m_s - 0.5).abs() < 1e-5);
+            }
+        }
+        assert_eq!(out, Twist::new(2.0, 1.0, 0.0));
+        assert_eq!(l.update(Twist::new(f32::NAN, 0.0, 0.0), 0.1), out);
+    }
+
+    #[test]
+    fn bad_geometry_is_rejected() {
+        assert_eq!(
+            LinearChassis::mecanum(MecanumConfig::new(0.0, 0.36, 0.076)).unwrap_err(),
+            ChassisError::InvalidDimension
+        );
+        // Two parallel omni wheels cannot tell rotation from translation.
+        assert_eq!(
+            LinearChassis::<2>::from_rows([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], 0.05, [1.0; 2])
+                .unwrap_err(),
+            ChassisError::Singular
+        );
+        assert_eq!(
+            rm_chassis().wheel_rpm(Twist::new(f32::NAN, 0.0, 0.0)),
+            [0.0; 4]
+        );
+    }
+
+    proptest! {
+        #[test]
+        fn mecanum_forward_of_inverse_is_identity(vx in -4f32..4.0, vy in -4f32..4.0, w in -10f32..10.0) {
+            let c = rm_chassis();
+            let t = c.twist(&c.wheel_rpm(Twist::new(vx, vy, w)));
+            prop_assert!((t.vx_m_s - vx).abs() < 1e-3 && (t.vy_m_s - vy).abs() < 1e-3);
+            prop_assert!((t.omega_rad_s - w).abs() < 1e-3);
+        }
+
+        #[test]
+        fn omni_forward_of_inverse_is_identity(vx in -4f32..4.0, vy in -4f32..4.0, w in -10f32..10.0) {
+            let c3 = omni::<3>(0.2, 0.05, FRAC_PI_2).unwrap();
+            let t = c3.twist(&c3.wheel_rpm(Twist::new(vx, vy, w)));
+            prop_assert!((t.vx_m_s - vx).abs() < 1e-3 && (t.vy_m_s - vy).abs() < 1e-3);
+            prop_assert!((t.omega_rad_s - w).abs() < 1e-3);
+            let c4 = omni::<4>(0.25, 0.05, core::f32::consts::FRAC_PI_4).unwrap();
+            let t = c4.twist(&c4.wheel_rpm(Twist::new(vx, vy, w)));
+            prop_assert!((t.vx_m_s - vx).abs() < 1e-3 && (t.omega_rad_s - w).abs() < 1e-3);
+        }
+
+        #[test]
+        fn swerve_forward_of_inverse_is_identity(vx in -4f32..4.0, vy in -4f32..4.0, w in -10f32..10.0) {
+            let s = Swerve::new(0.5, 0.4, 0.05).unwrap();
+            let m = s.modules(Twist::new(vx, vy, w), &[ModuleState::default(); 4]);
+            let t = s.twist(&m);
+            prop_assert!((t.vx_m_s - vx).abs() < 1e-3 && (t.vy_m_s - vy).abs() < 1e-3);
+            prop_assert!((t.omega_rad_s - w).abs() < 1e-3);
+            // Every module turned at most 90° from its start (0 rad).
+            prop_assert!(m.iter().all(|x| x.steer_rad.abs() <= FRAC_PI_2 + 1e-5));
+        }
+    }
+}
