@@ -13,4 +13,5 @@ pub mod math;
 pub mod motor;
 pub mod node;
 pub mod pid;
+pub mod remote;
 pub mod time;

@@ -1,0 +1,165 @@
+//! Remote-control receivers: DJI DR16 (DBUS), SBUS and PPM (RC10_LIB's AirJoy), as pure
+//! parsers fed with bytes or pulse widths and their arrival time, plus a [`Link`] that turns
+//! "no valid frame for a while" into neutral outputs and a flag.
+//!
+//! The parsers do no I/O: the STM32 adapter (or a test) feeds them from a UART or timer
+//! capture. Malformed input is counted and ignored, never parsed into a command.
+
+pub mod dbus;
+pub mod ppm;
+pub mod sbus;
+
+use crate::time::{Duration, Instant};
+
+/// The latest valid input of a receiver, or neutral after the signal is lost.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Signal<T> {
+    /// The last valid frame, or the neutral value while the link is lost.
+    pub value: T,
+    /// Whether the link is lost (no valid frame within the timeout, or the receiver itself
+    /// reported failsafe).
+    pub lost: bool,
+}
+
+/// Tracks one receiver link: the last valid frame, when it arrived, and counters.
+///
+/// ```
+/// use rc10_core::remote::Link;
+/// use rc10_core::time::{Duration, Instant};
+/// let mut link = Link::new(0u16, Duration::from_millis(100));
+/// link.accept(42, Instant::from_millis(10));
+/// assert_eq!(link.signal(Instant::from_millis(50)).value, 42);
+/// let later = link.signal(Instant::from_millis(111));
+/// assert!(later.lost);
+/// assert_eq!(later.value, 0); // neutral
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Link<T> {
+    neutral: T,
+    last: T,
+    last_valid: Option<Instant>,
+    failsafe: bool,
+    timeout: Duration,
+    frames: u32,
+    errors: u32,
+}
+
+impl<T: Copy> Link<T> {
+    /// A link that reports `neutral` until the first frame and after `timeout` of silence.
+    pub const fn new(neutral: T, timeout: Duration) -> Self {
+        Self {
+            neutral,
+            last: neutral,
+            last_valid: None,
+            failsafe: false,
+            timeout,
+            frames: 0,
+            errors: 0,
+        }
+    }
+
+    /// Records a valid frame received at `now`.
+    pub fn accept(&mut self, frame: T, now: Instant) {
+        self.last = frame;
+        self.last_valid = Some(now);
+        self.failsafe = false;
+        self.frames = self.frames.wrapping_add(1);
+    }
+
+    /// Records that the receiver itself reports failsafe (SBUS flag): outputs go neutral at
+    /// once, without waiting for the timeout.
+    pub fn failsafe(&mut self, now: Instant) {
+        self.failsafe = true;
+        self.last_valid = Some(now);
+    }
+
+    /// Counts a malformed frame (it changes nothing else).
+    pub fn reject(&mut self) {
+        self.errors = self.errors.wrapping_add(1);
+    }
+
+    /// The value to act on at `now`.
+    pub fn signal(&self, now: Instant) -> Signal<T> {
+        let fresh = match self.last_valid {
+            Some(t) => now <= t || now - t <= self.timeout,
+            None => false,
+        };
+        if fresh && !self.failsafe {
+            Signal {
+                value: self.last,
+                lost: false,
+            }
+        } else {
+            Signal {
+                value: self.neutral,
+                lost: true,
+            }
+        }
+    }
+
+    /// Valid frames accepted.
+    pub const fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Malformed frames rejected.
+    pub const fn errors(&self) -> u32 {
+        self.errors
+    }
+}
+
+/// Maps a raw channel value to −1…1 around `center` with `half_range` counts to full scale,
+/// clamped, with a `deadband` (fraction of full scale) around the centre.
+pub fn normalize(raw: u16, center: u16, half_range: u16, deadband: f32) -> f32 {
+    if half_range == 0 {
+        return 0.0;
+    }
+    let x = (f32::from(raw) - f32::from(center)) / f32::from(half_range);
+    let x = crate::math::constrain(x, -1.0, 1.0);
+    let db = crate::math::constrain(deadband, 0.0, 0.99);
+    if x.abs() <= db {
+        0.0
+    } else {
+        // Rescale so the output still reaches ±1 and starts from 0 at the band's edge.
+        x.signum() * (x.abs() - db) / (1.0 - db)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failsafe_goes_neutral_immediately_and_frames_recover() {
+        let mut link = Link::new(0i32, Duration::from_millis(100));
+        link.accept(5, Instant::from_millis(0));
+        link.failsafe(Instant::from_millis(1));
+        assert_eq!(
+            link.signal(Instant::from_millis(2)),
+            Signal {
+                value: 0,
+                lost: true
+            }
+        );
+        link.accept(7, Instant::from_millis(3));
+        assert_eq!(link.signal(Instant::from_millis(4)).value, 7);
+    }
+
+    #[test]
+    fn never_received_is_lost() {
+        let link = Link::new(0u8, Duration::from_millis(100));
+        assert!(link.signal(Instant::from_millis(0)).lost);
+    }
+
+    #[test]
+    fn normalize_centre_ends_and_deadband() {
+        assert_eq!(normalize(1024, 1024, 660, 0.0), 0.0);
+        assert_eq!(normalize(1684, 1024, 660, 0.0), 1.0);
+        assert_eq!(normalize(364, 1024, 660, 0.0), -1.0);
+        assert_eq!(normalize(2000, 1024, 660, 0.0), 1.0); // clamped
+        assert_eq!(normalize(1030, 1024, 660, 0.05), 0.0); // 0.009 inside the band
+        // Halfway between band edge (0.05) and 1: (0.525 − 0.05) / 0.95 = 0.5.
+        assert!((normalize(1024 + 346, 1024, 660, 0.05) - 0.5).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,190 @@
+//! PPM receivers (RC10_LIB's AirJoy): one pulse train per frame, each channel the time between
+//! two rising edges (about 1000–2000 µs), frames separated by a long sync gap.
+
+use super::{Link, Signal, normalize};
+use crate::time::{Duration, Instant};
+use core::fmt;
+
+/// Shortest interval accepted as a channel, µs.
+pub const MIN_CHANNEL_US: u32 = 800;
+/// Longest interval accepted as a channel, µs.
+pub const MAX_CHANNEL_US: u32 = 2200;
+/// Intervals at least this long are the sync gap between frames, µs.
+pub const MIN_SYNC_US: u32 = 2700;
+
+/// Why a PPM frame was dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PpmError {
+    /// An interval neither a channel nor a sync gap (noise); the frame is dropped.
+    BadInterval(u32),
+    /// A sync gap came after this many channels instead of the expected number.
+    WrongChannelCount(usize),
+}
+
+impl fmt::Display for PpmError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::BadInterval(us) => write!(f, "PPM interval of {us} µs is no channel"),
+            Self::WrongChannelCount(n) => write!(f, "PPM frame with {n} channels"),
+        }
+    }
+}
+
+impl core::error::Error for PpmError {}
+
+/// A PPM decoder for `N` channels, fed with the interval between successive rising edges
+/// (from a timer input capture).
+///
+/// ```
+/// use rc10_core::remote::ppm::PpmReceiver;
+/// use rc10_core::time::{Duration, Instant};
+/// let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
+/// let now = Instant::from_millis(20);
+/// rx.push_interval(5000, now); // sync gap
+/// for us in [1500, 1000, 2000, 1500, 1500, 1500, 1500, 1500] {
+///     rx.push_interval(us, now);
+/// }
+/// let frame = rx.push_interval(5000, now).unwrap().unwrap(); // next sync ends the frame
+/// assert_eq!(frame[2], 2000);
+/// assert_eq!(rx.channel(1, now, 0.0), -1.0);
+/// ```
+#[derive(Debug, Clone)]
+pub struct PpmReceiver<const N: usize> {
+    current: [u16; N],
+    count: usize,
+    synced: bool,
+    link: Link<[u16; N]>,
+}
+
+impl<const N: usize> PpmReceiver<N> {
+    /// A decoder that goes neutral (all 1500 µs) after `timeout` without a valid frame.
+    pub const fn new(timeout: Duration) -> Self {
+        Self {
+            current: [1500; N],
+            count: 0,
+            synced: false,
+            link: Link::new([1500; N], timeout),
+        }
+    }
+
+    /// Feeds one interval in µs measured at `now`; returns the frame a sync gap completed.
+    pub fn push_interval(
+        &mut self,
+        interval_us: u32,
+        now: Instant,
+    ) -> Option<Result<[u16; N], PpmError>> {
+        if interval_us >= MIN_SYNC_US {
+            let was_synced = self.synced;
+            let count = self.count;
+            self.synced = true;
+            self.count = 0;
+            if !was_synced {
+                return None; // the first sync only starts counting
+            }
+            return Some(if count == N {
+                self.link.accept(self.current, now);
+                Ok(self.current)
+            } else {
+                self.link.reject();
+                Err(PpmError::WrongChannelCount(count))
+            });
+        }
+        if !self.synced {
+            return None;
+        }
+        if !(MIN_CHANNEL_US..=MAX_CHANNEL_US).contains(&interval_us) {
+            self.synced = false; // wait for the next sync gap
+            self.count = 0;
+            self.link.reject();
+            return Some(Err(PpmError::BadInterval(interval_us)));
+        }
+        match self.current.get_mut(self.count) {
+            Some(slot) => *slot = interval_us as u16,
+            None => {
+                // More channels than expected: drop this frame at its sync.
+            }
+        }
+        self.count += 1;
+        None
+    }
+
+    /// The channels to act on at `now`, in µs (neutral 1500 if lost).
+    pub fn signal(&self, now: Instant) -> Signal<[u16; N]> {
+        self.link.signal(now)
+    }
+
+    /// Channel `i` at `now` in −1…1 (1000–2000 µs), with `deadband`; 0 when lost.
+    pub fn channel(&self, i: usize, now: Instant, deadband: f32) -> f32 {
+        self.signal(now)
+            .value
+            .get(i)
+            .map_or(0.0, |us| normalize(*us, 1500, 500, deadband))
+    }
+
+    /// The link's counters.
+    pub const fn link(&self) -> &Link<[u16; N]> {
+        &self.link
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn train(
+        rx: &mut PpmReceiver<8>,
+        channels: &[u32],
+        now: Instant,
+    ) -> Option<Result<[u16; 8], PpmError>> {
+        let mut last = None;
+        for us in channels {
+            if let Some(r) = rx.push_interval(*us, now) {
+                last = Some(r);
+            }
+        }
+        rx.push_interval(6000, now).or(last)
+    }
+
+    #[test]
+    fn frames_between_syncs_decode_and_noise_drops_one_frame() {
+        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
+        let t = Instant::from_millis(1);
+        rx.push_interval(6000, t);
+        let ok = [1100, 1200, 1300, 1400, 1500, 1600, 1700, 1800];
+        assert_eq!(
+            train(&mut rx, &ok, t),
+            Some(Ok([1100, 1200, 1300, 1400, 1500, 1600, 1700, 1800]))
+        );
+        // A noise spike of 300 µs: the frame is dropped, the next one decodes.
+        let noisy = [1100, 300, 1300];
+        assert_eq!(
+            train(&mut rx, &noisy, t),
+            Some(Err(PpmError::BadInterval(300)))
+        );
+        assert_eq!(train(&mut rx, &ok, t).unwrap().unwrap()[7], 1800);
+        assert_eq!(rx.link().errors(), 1);
+    }
+
+    #[test]
+    fn short_frame_is_rejected() {
+        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
+        let t = Instant::from_millis(1);
+        rx.push_interval(6000, t);
+        assert_eq!(
+            train(&mut rx, &[1500; 6], t),
+            Some(Err(PpmError::WrongChannelCount(6)))
+        );
+        assert!(rx.signal(t).lost);
+    }
+
+    #[test]
+    fn signal_loss_returns_neutral() {
+        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(50));
+        rx.push_interval(6000, Instant::from_millis(0));
+        train(&mut rx, &[2000; 8], Instant::from_millis(20));
+        assert_eq!(rx.channel(0, Instant::from_millis(60), 0.0), 1.0);
+        assert_eq!(rx.channel(0, Instant::from_millis(71), 0.0), 0.0);
+        assert!(rx.signal(Instant::from_millis(71)).lost);
+    }
+}
