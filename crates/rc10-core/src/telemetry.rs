@@ -1,0 +1,228 @@
+//! Telemetry for tuning: VOFA+ JustFloat and FireWater encoders, and [`Channels`], a static set
+//! of named `f32` values any task can publish without locks (a UART or RTT task sends them).
+//!
+//! ```
+//! use rc10_core::telemetry::Channels;
+//! // Target and measured rpm of two wheels, published from the control loop.
+//! static SCOPE: Channels<4> = Channels::new(["w1_target", "w1_rpm", "w2_target", "w2_rpm"]);
+//! SCOPE.set(0, 300.0);
+//! SCOPE.set(1, 297.5);
+//! let mut buf = [0u8; 64];
+//! let n = SCOPE.encode_justfloat(&mut buf).unwrap();
+//! assert_eq!(n, 4 * 4 + 4);
+//! assert_eq!(&buf[16..20], &[0x00, 0x00, 0x80, 0x7f]); // JustFloat tail
+//! ```
+
+use core::fmt::{self, Write as _};
+use core::sync::atomic::{AtomicU32, Ordering};
+
+/// The four bytes VOFA+ JustFloat puts after every frame (the bit pattern of +inf).
+pub const JUSTFLOAT_TAIL: [u8; 4] = [0x00, 0x00, 0x80, 0x7f];
+
+/// The output buffer is too small.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BufferTooSmall {
+    /// Bytes the frame needs (for JustFloat, exact; for FireWater, at least).
+    pub needed: usize,
+}
+
+impl fmt::Display for BufferTooSmall {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "telemetry buffer too small: {} bytes needed",
+            self.needed
+        )
+    }
+}
+
+impl core::error::Error for BufferTooSmall {}
+
+/// Encodes `values` as one JustFloat frame (little-endian f32s, then the tail) into `out`;
+/// returns the bytes written.
+pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+    let needed = 4 * values.len() + 4;
+    let frame = out.get_mut(..needed).ok_or(BufferTooSmall { needed })?;
+    let (data, tail) = frame.split_at_mut(4 * values.len());
+    for (chunk, v) in data.as_chunks_mut::<4>().0.iter_mut().zip(values) {
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    tail.copy_from_slice(&JUSTFLOAT_TAIL);
+    Ok(needed)
+}
+
+/// Encodes `values` as one FireWater line, `prefix:v1,v2,...\n` (no `prefix:` if `prefix` is
+/// empty), with `decimals` digits after the point; returns the bytes written. NaN and infinity
+/// are written as `nan` / `inf`, which VOFA+ shows as gaps rather than misreading them.
+pub fn firewater(
+    prefix: &str,
+    values: &[f32],
+    decimals: usize,
+    out: &mut [u8],
+) -> Result<usize, BufferTooSmall> {
+    let mut w = SliceWriter {
+        out,
+        len: 0,
+        overflow: false,
+    };
+    if !prefix.is_empty() {
+        let _ = write!(w, "{prefix}:");
+    }
+    for (i, v) in values.iter().enumerate() {
+        let sep = if i == 0 { "" } else { "," };
+        let _ = if v.is_finite() {
+            write!(w, "{sep}{v:.decimals$}")
+        } else if v.is_nan() {
+            write!(w, "{sep}nan")
+        } else {
+            write!(w, "{sep}{}inf", if *v < 0.0 { "-" } else { "" })
+        };
+    }
+    let _ = w.write_str("\n");
+    if w.overflow {
+        Err(BufferTooSmall { needed: w.len + 1 })
+    } else {
+        Ok(w.len)
+    }
+}
+
+struct SliceWriter<'a> {
+    out: &'a mut [u8],
+    len: usize,
+    overflow: bool,
+}
+
+impl fmt::Write for SliceWriter<'_> {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        let end = self.len + s.len();
+        match self.out.get_mut(self.len..end) {
+            Some(dst) if !self.overflow => {
+                dst.copy_from_slice(s.as_bytes());
+                self.len = end;
+                Ok(())
+            }
+            _ => {
+                self.overflow = true;
+                self.len = end;
+                Err(fmt::Error)
+            }
+        }
+    }
+}
+
+/// `N` named `f32` channels in a `static`: set from any task or interrupt without a lock (each
+/// value is one atomic word), read and encoded by the task that sends telemetry.
+#[derive(Debug)]
+pub struct Channels<const N: usize> {
+    names: [&'static str; N],
+    values: [AtomicU32; N],
+}
+
+impl<const N: usize> Channels<N> {
+    /// Channels with these names, all 0.0.
+    pub const fn new(names: [&'static str; N]) -> Self {
+        Self {
+            names,
+            values: [const { AtomicU32::new(0) }; N],
+        }
+    }
+
+    /// Sets channel `index`; returns `false` (and changes nothing) if there is no such channel.
+    pub fn set(&self, index: usize, value: f32) -> bool {
+        match self.values.get(index) {
+            Some(slot) => {
+                slot.store(value.to_bits(), Ordering::Relaxed);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Sets the channel called `name`; returns `false` if there is none.
+    pub fn set_named(&self, name: &str, value: f32) -> bool {
+        self.names
+            .iter()
+            .position(|n| *n == name)
+            .is_some_and(|i| self.set(i, value))
+    }
+
+    /// The value of channel `index`.
+    pub fn get(&self, index: usize) -> Option<f32> {
+        self.values
+            .get(index)
+            .map(|v| f32::from_bits(v.load(Ordering::Relaxed)))
+    }
+
+    /// The channel names, in order (configure VOFA+ with them).
+    pub const fn names(&self) -> &[&'static str; N] {
+        &self.names
+    }
+
+    /// All values now.
+    pub fn snapshot(&self) -> [f32; N] {
+        let mut out = [0.0; N];
+        for (o, v) in out.iter_mut().zip(&self.values) {
+            *o = f32::from_bits(v.load(Ordering::Relaxed));
+        }
+        out
+    }
+
+    /// One JustFloat frame of all channels.
+    pub fn encode_justfloat(&self, out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+        justfloat(&self.snapshot(), out)
+    }
+
+    /// One FireWater line of all channels.
+    pub fn encode_firewater(
+        &self,
+        prefix: &str,
+        decimals: usize,
+        out: &mut [u8],
+    ) -> Result<usize, BufferTooSmall> {
+        firewater(prefix, &self.snapshot(), decimals, out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn justfloat_bytes_are_little_endian_floats_then_tail() {
+        let mut buf = [0u8; 12];
+        // 1.0 = 0x3F800000, -2.0 = 0xC0000000.
+        assert_eq!(justfloat(&[1.0, -2.0], &mut buf), Ok(12));
+        assert_eq!(
+            buf,
+            [0, 0, 0x80, 0x3F, 0, 0, 0, 0xC0, 0x00, 0x00, 0x80, 0x7f]
+        );
+        assert_eq!(
+            justfloat(&[1.0, 2.0, 3.0], &mut buf),
+            Err(BufferTooSmall { needed: 16 })
+        );
+    }
+
+    #[test]
+    fn firewater_line_format() {
+        let mut buf = [0u8; 64];
+        let n = firewater("rpm", &[300.0, -12.5, f32::NAN], 2, &mut buf).unwrap();
+        assert_eq!(&buf[..n], b"rpm:300.00,-12.50,nan\n");
+        let n = firewater("", &[1.0], 0, &mut buf).unwrap();
+        assert_eq!(&buf[..n], b"1\n");
+        assert!(firewater("x", &[123456.0], 3, &mut buf[..8]).is_err());
+    }
+
+    #[test]
+    fn channels_set_by_index_and_name() {
+        let ch = Channels::new(["a", "b"]);
+        assert!(ch.set(1, 2.5));
+        assert!(ch.set_named("a", -1.0));
+        assert!(!ch.set(2, 0.0));
+        assert!(!ch.set_named("c", 0.0));
+        assert_eq!(ch.snapshot(), [-1.0, 2.5]);
+        let mut buf = [0u8; 32];
+        let n = ch.encode_firewater("m", 1, &mut buf).unwrap();
+        assert_eq!(&buf[..n], b"m:-1.0,2.5\n");
+    }
+}
