@@ -337,3 +337,54 @@ fn gm6020_current_mode_gimbal_holds_angle_with_default_gains() {
     // The current command never exceeds the GM6020's 3 A range.
     assert!(series.iter().all(|(_, m)| m.command.abs() <= 3.0));
 }
+
+#[test]
+fn remote_driven_mecanum_chassis_tracks_the_sticks_and_stops_on_radio_loss() {
+    let s = scenario("chassis-remote-drive");
+    let r = run(&s).unwrap();
+    let c: Vec<(u64, rc10_sim::scenario::ChassisSample)> = r
+        .samples
+        .iter()
+        .map(|x| (x.t_ms, x.chassis.unwrap()))
+        .collect();
+    let at = |t: u64| c.iter().find(|(ms, _)| *ms == t).unwrap().1;
+    // Full forward stick: 2 m/s after the 4 m/s² ramp, achieved by the four wheels.
+    let fwd = at(900);
+    assert!((fwd.commanded.vx_m_s - 2.0).abs() < 1e-3);
+    assert!((fwd.achieved.vx_m_s - 2.0).abs() < 0.05, "{fwd:?}");
+    assert!(fwd.achieved.vy_m_s.abs() < 0.02 && fwd.achieved.omega_rad_s.abs() < 0.02);
+    // Strafe left (stick left): +vy.
+    assert!((at(1700).achieved.vy_m_s - 2.0).abs() < 0.05);
+    // Half stick right-x to the left: spin counter-clockwise at 4 rad/s · 0.49 (deadband).
+    assert!((at(2500).achieved.omega_rad_s - 1.96).abs() < 0.05);
+    // Diagonal: the direction is kept.
+    let diag = at(3250).achieved;
+    assert!((diag.vy_m_s / diag.vx_m_s - 1.0).abs() < 0.02, "{diag:?}");
+    // Tracking over the whole run.
+    let rms = (c
+        .iter()
+        .map(|(_, x)| (x.achieved.vx_m_s - x.commanded.vx_m_s).powi(2))
+        .sum::<f32>()
+        / c.len() as f32)
+        .sqrt();
+    assert!(rms < 0.05, "rms {rms}");
+    // Radio off at 3300 ms: lost within the 100 ms timeout after the last frame...
+    let lost = c.iter().find(|(t, x)| *t >= 3300 && x.link_lost).unwrap().0;
+    assert!((3385..=3401).contains(&lost), "lost at {lost}");
+    // ...the command ramps to zero and the chassis stops: 1.39 m/s at 4 m/s² ≈ 0.35 s.
+    let stopped = c
+        .iter()
+        .find(|(t, x)| {
+            *t >= lost && x.achieved.vx_m_s.abs() < 0.05 && x.achieved.vy_m_s.abs() < 0.05
+        })
+        .unwrap()
+        .0;
+    assert!(
+        stopped - lost < 450,
+        "stopped {} ms after loss",
+        stopped - lost
+    );
+    let end = c.last().unwrap().1;
+    assert!(end.achieved.vx_m_s.abs() < 0.02 && end.commanded == rc10_core::chassis::Twist::ZERO);
+    assert_eq!(r.offline_events, vec![0; 4]);
+}

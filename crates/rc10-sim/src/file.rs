@@ -404,6 +404,8 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
         targets,
         faults,
         bus,
+        // Chassis applications are built-in only for now (`chassis-remote-drive`).
+        chassis: None,
     })
 }
 

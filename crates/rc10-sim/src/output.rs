@@ -1,8 +1,9 @@
 //! Results for people: a metrics table for the terminal, per-tick traces as CSV, and plots of
 //! target vs response and current as SVG (plotters; no system fonts needed).
 
-use crate::scenario::{RunResult, Scenario, TargetKind};
+use crate::scenario::{ChassisSample, RunResult, Scenario, TargetKind};
 use plotters::prelude::*;
+use rc10_core::chassis::Twist;
 use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -58,6 +59,9 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
             x.peak_current_amps
         );
     }
+    if let Some(t) = chassis_summary(scenario, result) {
+        s.push_str(&t);
+    }
     let c = &result.counters;
     let bus_load = 100.0 * result.bus.busy_us as f64 / (scenario.duration_ms as f64 * 1e3);
     let _ = writeln!(
@@ -85,6 +89,50 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
     s
 }
 
+/// Twist tracking figures of a chassis scenario.
+fn chassis_summary(scenario: &Scenario, result: &RunResult) -> Option<String> {
+    let drive = scenario.chassis.as_ref()?;
+    let c: Vec<(u64, ChassisSample)> = result
+        .samples
+        .iter()
+        .filter_map(|s| s.chassis.map(|c| (s.t_ms, c)))
+        .collect();
+    let n = c.len().max(1) as f32;
+    let rms = |f: &dyn Fn(&ChassisSample) -> f32| {
+        (c.iter().map(|(_, x)| f(x) * f(x)).sum::<f32>() / n).sqrt()
+    };
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "chassis   twist error RMS: vx {:.3} m/s, vy {:.3} m/s, w {:.3} rad/s",
+        rms(&|x| x.achieved.vx_m_s - x.commanded.vx_m_s),
+        rms(&|x| x.achieved.vy_m_s - x.commanded.vy_m_s),
+        rms(&|x| x.achieved.omega_rad_s - x.commanded.omega_rad_s),
+    );
+    for (from, _) in &drive.radio_off {
+        let lost = c
+            .iter()
+            .find(|(t, x)| t >= from && x.link_lost)
+            .map(|(t, _)| *t);
+        let stopped = lost.and_then(|l| {
+            c.iter()
+                .find(|(t, x)| {
+                    *t >= l
+                        && x.achieved.vx_m_s.hypot(x.achieved.vy_m_s) < 0.05
+                        && x.achieved.omega_rad_s.abs() < 0.05
+                })
+                .map(|(t, _)| *t)
+        });
+        let _ = writeln!(
+            s,
+            "          radio off at {from} ms: link lost after {}, chassis stopped after {}",
+            lost.map_or("never".into(), |t| format!("{} ms", t - from)),
+            stopped.map_or("never".into(), |t| format!("{} ms", t - from)),
+        );
+    }
+    Some(s)
+}
+
 /// Writes the per-tick trace as CSV: one row per ms, one column group per motor.
 pub fn write_csv(result: &RunResult, path: &Path) -> io::Result<()> {
     let mut out = String::from("t_ms");
@@ -95,6 +143,10 @@ pub fn write_csv(result: &RunResult, path: &Path) -> io::Result<()> {
             ",m{m}_target,m{m}_true_rpm,m{m}_measured_rpm,m{m}_true_total_deg,\
              m{m}_measured_total_deg,m{m}_command,m{m}_current_amps,m{m}_temperature_c,m{m}_online"
         );
+    }
+    let chassis = result.samples.first().is_some_and(|s| s.chassis.is_some());
+    if chassis {
+        out.push_str(",cmd_vx_m_s,cmd_vy_m_s,cmd_omega_rad_s,vx_m_s,vy_m_s,omega_rad_s,link_lost");
     }
     out.push('\n');
     for s in &result.samples {
@@ -112,6 +164,19 @@ pub fn write_csv(result: &RunResult, path: &Path) -> io::Result<()> {
                 m.current_amps,
                 m.temperature_c,
                 u8::from(m.online)
+            );
+        }
+        if let Some(c) = s.chassis {
+            let _ = write!(
+                out,
+                ",{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{}",
+                c.commanded.vx_m_s,
+                c.commanded.vy_m_s,
+                c.commanded.omega_rad_s,
+                c.achieved.vx_m_s,
+                c.achieved.vy_m_s,
+                c.achieved.omega_rad_s,
+                u8::from(c.link_lost)
             );
         }
         out.push('\n');
@@ -255,6 +320,88 @@ pub fn write_svg(scenario: &Scenario, result: &RunResult, path: &Path) -> io::Re
     root.present().map_err(plot_err)
 }
 
+/// A plotted twist component: its label and how to read it.
+type Axis = (&'static str, fn(&Twist) -> f32);
+
+/// Plots commanded (dashed) and achieved twist, one panel per axis, with radio-loss periods
+/// shaded.
+pub fn write_chassis_svg(scenario: &Scenario, result: &RunResult, path: &Path) -> io::Result<()> {
+    let root = SVGBackend::new(path, (1000, 720)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let panels = root.split_evenly((3, 1));
+    let t_end = scenario.duration_ms as f64 * 1e-3;
+    let axes: [Axis; 3] = [
+        ("vx (m/s)", |t| t.vx_m_s),
+        ("vy (m/s)", |t| t.vy_m_s),
+        ("omega (rad/s)", |t| t.omega_rad_s),
+    ];
+    for (k, (panel, (label, pick))) in panels.iter().zip(axes).enumerate() {
+        let pts: Vec<(f64, f64, f64, bool)> = result
+            .samples
+            .iter()
+            .filter_map(|s| {
+                s.chassis.map(|c| {
+                    (
+                        s.t_ms as f64 * 1e-3,
+                        f64::from(pick(&c.commanded)),
+                        f64::from(pick(&c.achieved)),
+                        c.link_lost,
+                    )
+                })
+            })
+            .collect();
+        let (lo, hi) = pts
+            .iter()
+            .flat_map(|p| [p.1, p.2])
+            .fold((0.0f64, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        let pad = ((hi - lo) * 0.1).max(0.1);
+        let mut builder = ChartBuilder::on(panel);
+        builder
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(60);
+        if k == 0 {
+            builder.caption(
+                format!("{} — commanded (dashed) and achieved twist", scenario.name),
+                ("sans-serif", 18),
+            );
+        }
+        let mut chart = builder
+            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc(label)
+            .draw()
+            .map_err(plot_err)?;
+        // Shade the ticks where the remote link was lost.
+        chart
+            .draw_series(pts.iter().filter(|p| p.3).map(|p| {
+                Rectangle::new(
+                    [(p.0, lo - pad), (p.0 + 1e-3, hi + pad)],
+                    RED.mix(0.08).filled(),
+                )
+            }))
+            .map_err(plot_err)?;
+        chart
+            .draw_series(DashedLineSeries::new(
+                pts.iter().map(|p| (p.0, p.1)),
+                6,
+                4,
+                BLACK.stroke_width(1),
+            ))
+            .map_err(plot_err)?;
+        chart
+            .draw_series(LineSeries::new(
+                pts.iter().map(|p| (p.0, p.2)),
+                BLUE.stroke_width(2),
+            ))
+            .map_err(plot_err)?;
+    }
+    root.present().map_err(plot_err)
+}
+
 /// Writes `<name>.csv` and (unless `plots` is false) `<name>.svg` into `dir`; returns the paths.
 pub fn write_all(
     scenario: &Scenario,
@@ -270,6 +417,11 @@ pub fn write_all(
         let svg = dir.join(format!("{}.svg", scenario.name));
         write_svg(scenario, result, &svg)?;
         paths.push(svg);
+        if scenario.chassis.is_some() {
+            let twist = dir.join(format!("{}-twist.svg", scenario.name));
+            write_chassis_svg(scenario, result, &twist)?;
+            paths.push(twist);
+        }
     }
     Ok(paths)
 }

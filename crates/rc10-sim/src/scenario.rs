@@ -14,10 +14,13 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{Rng, SeedableRng};
 use rc10_core::bus::{BusBuilder, BusConfig, FrameBudget, RegisterError};
 use rc10_core::can::{BusCounters, CanFrame, ReceiveError};
+use rc10_core::chassis::{LinearChassis, MecanumConfig, Twist, TwistLimiter};
 use rc10_core::math::wrap_deg_180;
 use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
 use rc10_core::motor::{Motor, TargetError};
 use rc10_core::node::{CanNode, TxBatch};
+use rc10_core::remote::dbus::DbusReceiver;
+use rc10_core::time::Duration;
 use rc10_core::time::Instant;
 use std::fmt;
 
@@ -147,6 +150,39 @@ pub enum Fault {
     },
 }
 
+/// Robot firmware driving a mecanum chassis from a DR16 remote: each DBUS frame (every 14 ms)
+/// is encoded as the receiver sends it and parsed by rc10's `DbusReceiver`; the sticks become a
+/// twist (left stick: vx, vy; right stick x: ω), limited by a `TwistLimiter`, turned into wheel
+/// rpm by rc10's mecanum kinematics (saturated together) and set on motors 1–4 (FL, FR, RL,
+/// RR). Achieved twist is the chassis's forward kinematics of the true wheel speeds (no slip;
+/// each wheel carries its share of the robot's inertia as its own load).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChassisDrive {
+    /// Chassis geometry and motor signs.
+    pub geometry: MecanumConfig,
+    /// Twist at full stick deflection (m/s, m/s, rad/s).
+    pub max_twist: Twist,
+    /// Acceleration limits (m/s², m/s², rad/s²).
+    pub max_accel: Twist,
+    /// Wheel speed limit, output rpm.
+    pub max_wheel_rpm: f32,
+    /// Stick positions from a time on (ms): right x, right y, left x, left y in −1…1.
+    pub sticks: Vec<(u64, [f32; 4])>,
+    /// Windows `[from_ms, to_ms)` in which the receiver sends nothing.
+    pub radio_off: Vec<(u64, u64)>,
+}
+
+/// What the chassis application commanded and what the chassis did, at one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ChassisSample {
+    /// Twist sent to the kinematics (after the limiter).
+    pub commanded: Twist,
+    /// Twist from the true wheel speeds.
+    pub achieved: Twist,
+    /// Whether the remote link was lost.
+    pub link_lost: bool,
+}
+
 /// Everything a run needs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scenario {
@@ -166,6 +202,8 @@ pub struct Scenario {
     pub faults: Vec<Fault>,
     /// rc10 bus configuration (bitrate, registration budget).
     pub bus: BusConfig,
+    /// Robot firmware driving motors 1–4 as a mecanum chassis from a remote, if any.
+    pub chassis: Option<ChassisDrive>,
 }
 
 /// Why a scenario could not run.
@@ -238,6 +276,8 @@ pub struct Sample {
     pub t_ms: u64,
     /// One per motor, in scenario order.
     pub motors: Vec<MotorSample>,
+    /// The chassis application's view, in chassis scenarios.
+    pub chassis: Option<ChassisSample>,
 }
 
 /// Step metrics of one target profile's last step.
@@ -374,6 +414,11 @@ pub fn run_with_progress(
         next_feedback.push(phase);
     }
 
+    let mut app = match &scenario.chassis {
+        Some(drive) => Some(ChassisApp::new(drive, motors.len())?),
+        None => None,
+    };
+
     let end_us = scenario.duration_ms * 1000;
     let (mut next_plant, mut next_tick) = (0u64, 0u64);
     let mut batch = TxBatch::new();
@@ -478,6 +523,13 @@ pub fn run_with_progress(
                 }
             }
             let now = Instant::from_micros(t);
+            let chassis = match (&mut app, &scenario.chassis) {
+                (Some(app), Some(drive)) => Some(
+                    app.step(drive, &motors, &escs, t_ms, now)
+                        .map_err(|reason| SimError::Target { target: 0, reason })?,
+                ),
+                _ => None,
+            };
             rc10.tick(now, TICK_US as f32 * 1e-6, &mut batch);
             rc10.transmit(&batch, &mut bus.mcu_port());
             samples.push(Sample {
@@ -500,6 +552,7 @@ pub fn run_with_progress(
                         }
                     })
                     .collect(),
+                chassis,
             });
             next_tick += TICK_US;
             if t_ms % 1000 == 999 {
@@ -526,6 +579,104 @@ pub fn run_with_progress(
         metrics,
         samples,
     })
+}
+
+/// The robot firmware of a chassis scenario.
+struct ChassisApp {
+    kinematics: LinearChassis<4>,
+    limiter: TwistLimiter,
+    receiver: DbusReceiver,
+}
+
+/// DR16 frame period.
+const DBUS_PERIOD_MS: u64 = 14;
+
+impl ChassisApp {
+    fn new(drive: &ChassisDrive, motor_count: usize) -> Result<Self, SimError> {
+        if motor_count < 4 {
+            return Err(SimError::InvalidMotor {
+                motor: motor_count,
+                reason: "a chassis needs motors 1-4 (FL, FR, RL, RR)".into(),
+            });
+        }
+        let kinematics =
+            LinearChassis::mecanum(drive.geometry).map_err(|e| SimError::InvalidMotor {
+                motor: 0,
+                reason: e.to_string(),
+            })?;
+        Ok(Self {
+            kinematics,
+            limiter: TwistLimiter::new(drive.max_accel),
+            receiver: DbusReceiver::new(Duration::from_millis(100)),
+        })
+    }
+
+    fn step(
+        &mut self,
+        drive: &ChassisDrive,
+        motors: &[Box<dyn SimMotor>],
+        escs: &[DjiEsc],
+        t_ms: u64,
+        now: Instant,
+    ) -> Result<ChassisSample, String> {
+        let radio_on = !drive
+            .radio_off
+            .iter()
+            .any(|(from, to)| in_window(t_ms, *from, *to));
+        if radio_on && t_ms.is_multiple_of(DBUS_PERIOD_MS) {
+            let sticks = drive
+                .sticks
+                .iter()
+                .rev()
+                .find(|(at, _)| *at <= t_ms)
+                .map_or([0.0; 4], |(_, s)| *s);
+            // The bytes a DR16 would send, parsed by rc10 as on the robot.
+            let _ = self.receiver.push_frame(&encode_dbus(sticks), now);
+        }
+        let signal = self.receiver.signal(now);
+        let f = signal.value;
+        let m = drive.max_twist;
+        let wanted = Twist::new(
+            f.stick(3, 0.02) * m.vx_m_s,
+            -f.stick(2, 0.02) * m.vy_m_s,
+            -f.stick(0, 0.02) * m.omega_rad_s,
+        );
+        let commanded = self.limiter.update(wanted, TICK_US as f32 * 1e-6);
+        let rpm = self
+            .kinematics
+            .wheel_rpm_limited(commanded, drive.max_wheel_rpm);
+        for (motor, target) in motors.iter().zip(rpm) {
+            motor.set_target_rpm(target).map_err(|e| e.to_string())?;
+        }
+        let mut true_rpm = [0.0f32; 4];
+        for (r, esc) in true_rpm.iter_mut().zip(escs) {
+            *r = esc.speed_rpm() as f32;
+        }
+        Ok(ChassisSample {
+            commanded,
+            achieved: self.kinematics.twist(&true_rpm),
+            link_lost: signal.lost,
+        })
+    }
+}
+
+/// A DBUS frame as a DR16 sends it for sticks in −1…1 (right x, right y, left x, left y), both
+/// switches in the middle.
+fn encode_dbus(sticks: [f32; 4]) -> [u8; 18] {
+    let mut bits: u64 = 0;
+    for (i, s) in sticks.iter().enumerate() {
+        let raw = (1024.0 + 660.0 * f64::from(s.clamp(-1.0, 1.0))).round() as u64;
+        bits |= raw << (11 * i);
+    }
+    bits |= 3 << 44 | 3 << 46;
+    let mut frame = [0u8; 18];
+    for (i, byte) in frame.iter_mut().take(6).enumerate() {
+        *byte = (bits >> (8 * i)) as u8;
+    }
+    if let Some(wheel) = frame.get_mut(16..18) {
+        wheel.copy_from_slice(&1024u16.to_le_bytes());
+    }
+    frame
 }
 
 fn in_window(t_ms: u64, from_ms: u64, to_ms: u64) -> bool {
@@ -704,6 +855,7 @@ pub fn builtin() -> Vec<Scenario> {
         targets: Vec::new(),
         faults: Vec::new(),
         bus: BusConfig::DEFAULT,
+        chassis: None,
     };
     let speed_step = |motor| TargetSpec {
         motor,
@@ -836,5 +988,43 @@ pub fn builtin() -> Vec<Scenario> {
                 1000,
             )
         },
+        chassis_remote_drive(base(
+            "chassis-remote-drive",
+            "a DR16 drives a 16 kg mecanum chassis: forward, strafe, spin, diagonal, radio loss",
+            4400,
+        )),
     ]
+}
+
+/// A 16 kg RoboMaster-style mecanum chassis driven through a stick profile, with a radio loss.
+fn chassis_remote_drive(base: Scenario) -> Scenario {
+    // Each 76 mm wheel carries a quarter of 16 kg: 4 kg · 0.076² = 0.0231 kg·m² at its shaft,
+    // and 0.05 N·m of rolling resistance.
+    let wheel = |id| MotorSpec {
+        load: Load {
+            inertia_kg_m2: 0.0231,
+            torque_nm: 0.05,
+            step: None,
+        },
+        ..m3508(id, Controller::Rc10)
+    };
+    Scenario {
+        motors: (1..=4).map(wheel).collect(),
+        chassis: Some(ChassisDrive {
+            geometry: MecanumConfig::new(0.4, 0.36, 0.076).with_wheel_signs([1.0, -1.0, 1.0, -1.0]),
+            max_twist: Twist::new(2.0, 2.0, 4.0),
+            max_accel: Twist::new(4.0, 4.0, 12.0),
+            max_wheel_rpm: 400.0,
+            sticks: vec![
+                (0, [0.0; 4]),
+                (200, [0.0, 0.0, 0.0, 1.0]),   // full forward
+                (1000, [0.0, 0.0, -1.0, 0.0]), // strafe left
+                (1800, [-0.5, 0.0, 0.0, 0.0]), // spin left at half stick
+                (2600, [0.0, 0.0, -0.7, 0.7]), // diagonal forward-left
+                (3600, [0.0; 4]),              // pilot lets go while the radio is off
+            ],
+            radio_off: vec![(3300, 3700)],
+        }),
+        ..base
+    }
 }
