@@ -133,7 +133,8 @@ pub struct DjiConfig {
     /// Offline timeout, multi-turn policy and thermal limits.
     pub health: HealthConfig,
     /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
-    /// firmware). Ignored by the other models.
+    /// firmware). Ignored by the other models. When raising it, raise the speed loop's
+    /// `output_limit` (volts, 30000 ↔ 24 V) too, or the loop never asks for more.
     pub voltage_raw_limit: i16,
     /// Where the multi-turn angle starts (GM6020: absolute with its zero offset is typical).
     pub origin: Origin,
@@ -211,6 +212,8 @@ pub enum DjiError {
     Pid(PidConfigError),
     /// The encoder origin's zero offset is not below 8192.
     InvalidOrigin,
+    /// Thermal limits that are not finite or where derating does not start below the cut-off.
+    InvalidThermal,
 }
 
 impl fmt::Display for DjiError {
@@ -219,6 +222,9 @@ impl fmt::Display for DjiError {
             Self::IdOutOfRange { id, max } => write!(f, "DJI ESC id {id} not in 1..={max}"),
             Self::Pid(e) => write!(f, "DJI motor loop: {e}"),
             Self::InvalidOrigin => f.write_str("DJI encoder zero offset not below 8192"),
+            Self::InvalidThermal => {
+                f.write_str("DJI thermal limits not finite or derating not below cut-off")
+            }
         }
     }
 }
@@ -271,6 +277,13 @@ impl DjiMotor {
         let Some(slot) = model.command_slot(esc_id) else {
             return Err(DjiError::IdOutOfRange { id: esc_id, max });
         };
+        if let Some(t) = config.health.thermal
+            && !(t.derate_start_c.is_finite()
+                && t.cutoff_c.is_finite()
+                && t.derate_start_c < t.cutoff_c)
+        {
+            return Err(DjiError::InvalidThermal);
+        }
         let cascade = match Cascade::new(config.cascade) {
             Ok(c) => c,
             Err(e) => return Err(DjiError::Pid(e)),
@@ -351,6 +364,17 @@ impl DjiMotor {
     /// The speed loop's last per-term output (for tuning and telemetry).
     pub fn speed_loop_terms(&self) -> crate::pid::PidTerms {
         self.state.lock(|s| s.borrow().cascade.speed_terms())
+    }
+
+    /// The largest command this motor sends, in amps (volts in voltage mode): the ESC's range,
+    /// or for the GM6020 in voltage mode the configured [`DjiConfig::voltage_raw_limit`].
+    pub fn command_limit(&self) -> f32 {
+        if self.model.is_voltage_mode() {
+            let (raw_fs, unit_fs) = self.model.raw_full_scale();
+            f32::from(self.config.voltage_raw_limit.max(0)) * (unit_fs / raw_fs)
+        } else {
+            self.model.max_command()
+        }
     }
 
     /// Converts a command (amps, or volts in voltage mode) to the raw slot value, clamped to
@@ -452,7 +476,7 @@ impl CanNode for DjiMotor {
                 total_angle_deg: s.encoder.total_angle_deg(),
             };
             let out = s.cascade.step(&measured, dt_s);
-            s.command = saturate(out, self.model.max_command() * derate);
+            s.command = saturate(out, self.command_limit() * derate);
         });
     }
 

@@ -125,6 +125,22 @@ fn gm6020_voltage_limit_is_configurable_to_30000() {
 }
 
 #[test]
+fn raised_voltage_limit_is_reachable_through_the_control_path() {
+    let model = DjiModel::Gm6020Voltage;
+    let mut cfg = DjiConfig::default_for(model);
+    cfg.voltage_raw_limit = 30000;
+    let m = DjiMotor::new(model, 1, cfg).unwrap();
+    assert_eq!(m.command_limit(), 24.0);
+    online(&m);
+    m.set_target_voltage(24.0).unwrap();
+    // 24 V = 30000 = 0x7530 in slot 0 of 0x1FF (not held at the default 25000).
+    assert_eq!(
+        only_frame(&tick(&m, T0)),
+        (0x1FF, [0x75, 0x30, 0, 0, 0, 0, 0, 0])
+    );
+}
+
+#[test]
 fn gm6020_current_mode_uses_0x1fe_0x2fe() {
     let m = DjiMotor::gm6020_current(6).unwrap();
     online(&m);
@@ -160,6 +176,27 @@ fn every_id_maps_to_its_slot() {
         );
         assert!(m.matches_frame(&fb(0x204 + u16::from(id), 0, 0, 0, 0)));
     }
+}
+
+#[test]
+fn invalid_thermal_limits_are_rejected() {
+    let mut cfg = DjiConfig::default_for(DjiModel::M3508);
+    cfg.health.thermal = Some(ThermalLimits {
+        derate_start_c: f32::NAN,
+        cutoff_c: 120.0,
+    });
+    assert_eq!(
+        DjiMotor::new(DjiModel::M3508, 1, cfg).unwrap_err(),
+        DjiError::InvalidThermal
+    );
+    cfg.health.thermal = Some(ThermalLimits {
+        derate_start_c: 120.0,
+        cutoff_c: 100.0,
+    });
+    assert_eq!(
+        DjiMotor::new(DjiModel::M3508, 1, cfg).unwrap_err(),
+        DjiError::InvalidThermal
+    );
 }
 
 #[test]
