@@ -388,3 +388,29 @@ fn remote_driven_mecanum_chassis_tracks_the_sticks_and_stops_on_radio_loss() {
     assert!(end.achieved.vx_m_s.abs() < 0.02 && end.commanded == rc10_core::chassis::Twist::ZERO);
     assert_eq!(r.offline_events, vec![0; 4]);
 }
+
+#[test]
+fn example_mecanum_file_drives_and_fails_safe() {
+    let r = run(&example_file("mecanum-drive.toml")).unwrap();
+    let c = |t: u64| {
+        r.samples
+            .iter()
+            .find(|s| s.t_ms == t)
+            .unwrap()
+            .chassis
+            .unwrap()
+    };
+    // Full forward: 2.5 m/s is 314 rpm per wheel, inside the 450 rpm limit.
+    assert!((c(850).achieved.vx_m_s - 2.5).abs() < 0.06, "{:?}", c(850));
+    // Full spin: 5 rad/s needs 0.38 · 5 / 0.076 rad/s = 239 rpm: reached by the end of the
+    // segment (the limiter takes 0.5 s to swap 2 m/s of strafe for 5 rad/s of spin).
+    assert!(
+        (c(2295).achieved.omega_rad_s - 5.0).abs() < 0.1,
+        "{:?}",
+        c(2295)
+    );
+    // The stick stays pushed but the radio is silent from 2600 ms: stopped by the end.
+    let end = r.samples.last().unwrap().chassis.unwrap();
+    assert!(end.link_lost);
+    assert!(end.achieved.vx_m_s.abs() < 0.05, "{end:?}");
+}

@@ -28,11 +28,30 @@
 //! to_ms = 500
 //! ```
 //!
+//! A mecanum chassis driven by a DR16 remote (motors 1–4 are FL, FR, RL, RR):
+//!
+//! ```toml
+//! [chassis]
+//! wheelbase_m = 0.4
+//! track_m = 0.36
+//! wheel_radius_m = 0.076
+//! rollers = "o"                       # o (default) | x
+//! wheel_signs = [1, -1, 1, -1]        # motors on the right face the other way
+//! max_twist = { vx_m_s = 2.0, vy_m_s = 2.0, omega_rad_s = 4.0 }     # full stick
+//! max_accel = { vx_m_s = 4.0, vy_m_s = 4.0, omega_rad_s = 12.0 }
+//! max_wheel_rpm = 400
+//! sticks = [[0, 0, 0, 0, 0], [200, 0, 0, 0, 1.0]]   # [ms, right x, right y, left x, left y]
+//! radio_off = [[3300, 3700]]          # windows without DBUS frames
+//! ```
+//!
 //! Unknown keys are errors, and every error names the entry and field at fault.
 
 use crate::plant::Load;
-use crate::scenario::{Controller, Fault, MotorSpec, Scenario, TargetKind, TargetSpec};
+use crate::scenario::{
+    ChassisDrive, Controller, Fault, MotorSpec, Scenario, TargetKind, TargetSpec,
+};
 use rc10_core::bus::BusConfig;
+use rc10_core::chassis::{LinearChassis, MecanumConfig, MecanumRollers, Twist};
 use rc10_core::motor::dji::{DjiConfig, DjiModel};
 use rc10_core::pid::PidConfig;
 use serde::Deserialize;
@@ -85,6 +104,46 @@ struct FileScenario {
     targets: Vec<FileTarget>,
     #[serde(default, rename = "fault")]
     faults: Vec<FileFault>,
+    #[serde(default)]
+    chassis: Option<FileChassis>,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileTwist {
+    vx_m_s: f32,
+    vy_m_s: f32,
+    omega_rad_s: f32,
+}
+
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum FileRollers {
+    #[default]
+    O,
+    X,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileChassis {
+    wheelbase_m: f32,
+    track_m: f32,
+    wheel_radius_m: f32,
+    #[serde(default)]
+    rollers: FileRollers,
+    #[serde(default = "unit_signs")]
+    wheel_signs: [f32; 4],
+    max_twist: FileTwist,
+    max_accel: FileTwist,
+    max_wheel_rpm: f32,
+    sticks: Vec<(u64, f32, f32, f32, f32)>,
+    #[serde(default)]
+    radio_off: Vec<(u64, u64)>,
+}
+
+fn unit_signs() -> [f32; 4] {
+    [1.0; 4]
 }
 
 fn one() -> u64 {
@@ -388,6 +447,10 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
             }
         });
     }
+    let chassis = match &file.chassis {
+        Some(c) => Some(chassis_drive(c, motor_count)?),
+        None => None,
+    };
     let mut bus = BusConfig::DEFAULT;
     if let Some(b) = file.bitrate_bps {
         if b == 0 {
@@ -404,8 +467,58 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
         targets,
         faults,
         bus,
-        // Chassis applications are built-in only for now (`chassis-remote-drive`).
-        chassis: None,
+        chassis,
+    })
+}
+
+fn chassis_drive(c: &FileChassis, motor_count: usize) -> Result<ChassisDrive, FileError> {
+    if motor_count < 4 {
+        return Err(invalid(
+            "chassis".into(),
+            format!("a chassis drives motors 1-4 (FL, FR, RL, RR); the file has {motor_count}"),
+        ));
+    }
+    let geometry = MecanumConfig::new(c.wheelbase_m, c.track_m, c.wheel_radius_m)
+        .with_rollers(match c.rollers {
+            FileRollers::O => MecanumRollers::O,
+            FileRollers::X => MecanumRollers::X,
+        })
+        .with_wheel_signs(c.wheel_signs);
+    LinearChassis::mecanum(geometry).map_err(|e| invalid("chassis".into(), e.to_string()))?;
+    let twist = |t: FileTwist| Twist::new(t.vx_m_s, t.vy_m_s, t.omega_rad_s);
+    if c.sticks
+        .windows(2)
+        .any(|w| matches!(w, [a, b] if b.0 < a.0))
+    {
+        return Err(invalid("chassis.sticks".into(), "times must not decrease"));
+    }
+    let mut sticks = Vec::new();
+    for (i, &(t, rx, ry, lx, ly)) in c.sticks.iter().enumerate() {
+        let values = [rx, ry, lx, ly];
+        if values.iter().any(|v| !(-1.0..=1.0).contains(v)) {
+            return Err(invalid(
+                format!("chassis.sticks[{}]", i + 1),
+                "stick positions must be within -1..1",
+            ));
+        }
+        sticks.push((t, values));
+    }
+    if c.radio_off.iter().any(|(from, to)| to <= from) {
+        return Err(invalid(
+            "chassis.radio_off".into(),
+            "each window must end after it starts",
+        ));
+    }
+    if !(c.max_wheel_rpm.is_finite() && c.max_wheel_rpm > 0.0) {
+        return Err(invalid("chassis.max_wheel_rpm".into(), "must be positive"));
+    }
+    Ok(ChassisDrive {
+        geometry,
+        max_twist: twist(c.max_twist),
+        max_accel: twist(c.max_accel),
+        max_wheel_rpm: c.max_wheel_rpm,
+        sticks,
+        radio_off: c.radio_off.clone(),
     })
 }
 
@@ -557,6 +670,40 @@ mod tests {
         assert!(matches!(
             parse(&bad_fault).unwrap_err(),
             FileError::Invalid { field, .. } if field == "fault[1].probability"
+        ));
+    }
+
+    #[test]
+    fn chassis_table_parses_and_needs_four_motors() {
+        let chassis = r#"
+            [chassis]
+            wheelbase_m = 0.4
+            track_m = 0.36
+            wheel_radius_m = 0.076
+            wheel_signs = [1, -1, 1, -1]
+            max_twist = { vx_m_s = 2.0, vy_m_s = 2.0, omega_rad_s = 4.0 }
+            max_accel = { vx_m_s = 4.0, vy_m_s = 4.0, omega_rad_s = 12.0 }
+            max_wheel_rpm = 400
+            sticks = [[0, 0, 0, 0, 0], [100, 0, 0, 0, 1.0]]
+            radio_off = [[300, 400]]
+        "#;
+        let one_motor = format!("{MINIMAL}{chassis}");
+        assert!(matches!(
+            parse(&one_motor).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "chassis"
+        ));
+        let motors: String = (1..=4)
+            .map(|id| format!("[[motor]]\nmodel = \"m3508\"\nid = {id}\n"))
+            .collect();
+        let text = format!("name = \"c\"\nduration_ms = 500\n{motors}{chassis}");
+        let s = parse(&text).unwrap();
+        let drive = s.chassis.unwrap();
+        assert_eq!(drive.sticks[1], (100, [0.0, 0.0, 0.0, 1.0]));
+        assert_eq!(drive.radio_off, vec![(300, 400)]);
+        let bad = text.replace("1.0]]", "1.5]]");
+        assert!(matches!(
+            parse(&bad).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "chassis.sticks[2]"
         ));
     }
 

@@ -7,4 +7,4 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
-pub use rc10_core as core_crate;
+pub use rc10_core;
