@@ -334,11 +334,10 @@ impl<'a, const N: usize> Bus<'a, N> {
             self.stats.record_batch_overflow(out.overflowed());
         }
         self.stats.record_tick();
-        let counters = self.stats.snapshot();
         self.window.lock(|w| {
             w.borrow_mut().update(
                 now,
-                counters,
+                || self.stats.snapshot(),
                 self.config.rate_window,
                 self.config.bitrate_bps,
             )

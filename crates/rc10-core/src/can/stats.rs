@@ -243,10 +243,12 @@ impl RateWindow {
         self.latched
     }
 
+    /// Latches new rates if a window has passed since the last latch. `counters` is only
+    /// called then (once per window, not every tick).
     pub(crate) fn update(
         &mut self,
         now: Instant,
-        counters: BusCounters,
+        counters: impl FnOnce() -> BusCounters,
         window: Duration,
         bitrate_bps: u32,
     ) {
@@ -254,11 +256,12 @@ impl RateWindow {
             Some((t0, c0)) if now >= t0 => {
                 let elapsed = now - t0;
                 if elapsed >= window {
-                    self.latched = counters.since(&c0).rates(elapsed, bitrate_bps);
-                    self.start = Some((now, counters));
+                    let c = counters();
+                    self.latched = c.since(&c0).rates(elapsed, bitrate_bps);
+                    self.start = Some((now, c));
                 }
             }
-            _ => self.start = Some((now, counters)),
+            _ => self.start = Some((now, counters())),
         }
     }
 }
@@ -310,32 +313,25 @@ mod tests {
     }
 
     #[test]
-    fn window_latches_after_one_period() {
+    fn window_latches_after_one_period_and_snapshots_only_then() {
         let stats = BusStats::new();
         let mut w = RateWindow::new();
-        w.update(
-            Instant::from_micros(0),
-            stats.snapshot(),
-            Duration::from_secs(1),
-            1_000_000,
-        );
+        let second = Duration::from_secs(1);
+        let snapshots = core::cell::Cell::new(0);
+        let snap = || {
+            snapshots.set(snapshots.get() + 1);
+            stats.snapshot()
+        };
+        w.update(Instant::from_micros(0), snap, second, 1_000_000);
         for _ in 0..500 {
             stats.record_tx(100);
         }
-        w.update(
-            Instant::from_millis(500),
-            stats.snapshot(),
-            Duration::from_secs(1),
-            1_000_000,
-        );
+        w.update(Instant::from_millis(500), snap, second, 1_000_000);
         assert_eq!(w.latched().tx_frames_per_s, 0.0); // window not complete
-        w.update(
-            Instant::from_millis(1000),
-            stats.snapshot(),
-            Duration::from_secs(1),
-            1_000_000,
-        );
+        assert_eq!(snapshots.get(), 1); // no snapshot mid-window
+        w.update(Instant::from_millis(1000), snap, second, 1_000_000);
         assert_eq!(w.latched().tx_frames_per_s, 500.0);
         assert!((w.latched().load_percent - 5.0).abs() < 1e-4);
+        assert_eq!(snapshots.get(), 2);
     }
 }
