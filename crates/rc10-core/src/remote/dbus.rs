@@ -7,7 +7,7 @@
 //! (i16); bytes 12–13 mouse buttons; bytes 14–15 the keyboard bit mask; bytes 16–17 the wheel
 //! (11 bits, on newer receivers).
 
-use super::{Link, Signal, normalize};
+use super::{Framed, GapFramer, Link, Signal, normalize};
 use crate::time::{Duration, Instant};
 use core::fmt;
 
@@ -216,9 +216,7 @@ impl core::error::Error for DbusError {}
 /// 14 ms apart), so a lost byte costs one frame, not all that follow.
 #[derive(Debug, Clone)]
 pub struct DbusReceiver {
-    buf: [u8; FRAME_LEN],
-    len: usize,
-    last_byte: Option<Instant>,
+    framer: GapFramer<FRAME_LEN>,
     link: Link<DbusFrame>,
 }
 
@@ -230,33 +228,21 @@ impl DbusReceiver {
     /// every 14 ms; 100 ms is a sensible timeout).
     pub const fn new(timeout: Duration) -> Self {
         Self {
-            buf: [0; FRAME_LEN],
-            len: 0,
-            last_byte: None,
+            framer: GapFramer::new(FRAME_GAP),
             link: Link::new(DbusFrame::NEUTRAL, timeout),
         }
     }
 
     /// Feeds one byte received at `now`; returns the frame it completed, if any.
     pub fn push_byte(&mut self, byte: u8, now: Instant) -> Option<Result<DbusFrame, DbusError>> {
-        let gap = self
-            .last_byte
-            .is_none_or(|t| now < t || now - t > FRAME_GAP);
-        self.last_byte = Some(now);
-        if gap && self.len > 0 {
-            self.link.reject(); // a truncated frame
-            self.len = 0;
+        match self.framer.push(byte, now) {
+            Framed::Frame(frame) => Some(self.push_frame(&frame, now)),
+            Framed::Truncated => {
+                self.link.reject(); // the frame the gap cut short
+                None
+            }
+            Framed::Pending => None,
         }
-        if let Some(slot) = self.buf.get_mut(self.len) {
-            *slot = byte;
-            self.len += 1;
-        }
-        if self.len == FRAME_LEN {
-            self.len = 0;
-            let buf = self.buf;
-            return Some(self.push_frame(&buf, now));
-        }
-        None
     }
 
     /// Feeds a whole frame received at `now`.

@@ -109,6 +109,63 @@ impl<T: Copy> Link<T> {
     }
 }
 
+/// What feeding one byte to a [`GapFramer`] produced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framed<const N: usize> {
+    /// The frame is not complete yet.
+    Pending,
+    /// The byte completed a frame.
+    Frame([u8; N]),
+    /// The byte came after a gap that cut the previous frame short; it starts a new frame.
+    /// The short frame is dropped.
+    Truncated,
+}
+
+/// Assembles fixed-length frames from a byte stream whose frames are separated by silence on
+/// the line (DBUS, SBUS): a byte arriving more than `gap` after the previous one starts a new
+/// frame, so a lost byte costs one frame, not all that follow.
+#[derive(Debug, Clone)]
+pub struct GapFramer<const N: usize> {
+    buf: [u8; N],
+    len: usize,
+    last_byte: Option<Instant>,
+    gap: Duration,
+}
+
+impl<const N: usize> GapFramer<N> {
+    /// A framer for `N`-byte frames separated by more than `gap`.
+    pub const fn new(gap: Duration) -> Self {
+        Self {
+            buf: [0; N],
+            len: 0,
+            last_byte: None,
+            gap,
+        }
+    }
+
+    /// Feeds one byte received at `now`.
+    pub fn push(&mut self, byte: u8, now: Instant) -> Framed<N> {
+        let after_gap = self.last_byte.is_none_or(|t| now < t || now - t > self.gap);
+        self.last_byte = Some(now);
+        let truncated = after_gap && self.len > 0;
+        if truncated {
+            self.len = 0;
+        }
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = byte;
+            self.len += 1;
+        }
+        if self.len == N {
+            self.len = 0;
+            Framed::Frame(self.buf)
+        } else if truncated {
+            Framed::Truncated
+        } else {
+            Framed::Pending
+        }
+    }
+}
+
 /// Maps a raw channel value to −1…1 around `center` with `half_range` counts to full scale,
 /// clamped, with a `deadband` (fraction of full scale) around the centre.
 pub fn normalize(raw: u16, center: u16, half_range: u16, deadband: f32) -> f32 {
@@ -144,6 +201,19 @@ mod tests {
         );
         link.accept(7, Instant::from_millis(3));
         assert_eq!(link.signal(Instant::from_millis(4)).value, 7);
+    }
+
+    #[test]
+    fn gap_framer_cuts_on_silence_and_completes_on_length() {
+        let mut f = GapFramer::<3>::new(Duration::from_millis(1));
+        let at = Instant::from_micros;
+        assert_eq!(f.push(1, at(0)), Framed::Pending);
+        assert_eq!(f.push(2, at(100)), Framed::Pending);
+        // 2 ms of silence: the two bytes were a cut-short frame; 9 starts a new one.
+        assert_eq!(f.push(9, at(2100)), Framed::Truncated);
+        assert_eq!(f.push(8, at(2200)), Framed::Pending);
+        assert_eq!(f.push(7, at(2300)), Framed::Frame([9, 8, 7]));
+        assert_eq!(f.push(6, at(2400)), Framed::Pending);
     }
 
     #[test]

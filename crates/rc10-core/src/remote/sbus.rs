@@ -5,7 +5,7 @@
 //! bit 2 frame lost, bit 3 failsafe); byte 24 is the footer (0x00, or 0x04/0x14/0x24/0x34 on
 //! receivers that interleave telemetry slots). Channel values run about 172…1811, centre 992.
 
-use super::{Link, Signal, normalize};
+use super::{Framed, GapFramer, Link, Signal, normalize};
 use crate::time::{Duration, Instant};
 use core::fmt;
 
@@ -114,9 +114,7 @@ impl core::error::Error for SbusError {}
 /// neutral at once.
 #[derive(Debug, Clone)]
 pub struct SbusReceiver {
-    buf: [u8; FRAME_LEN],
-    len: usize,
-    last_byte: Option<Instant>,
+    framer: GapFramer<FRAME_LEN>,
     link: Link<SbusFrame>,
     frames_lost: u32,
 }
@@ -127,9 +125,7 @@ impl SbusReceiver {
     /// A receiver that goes neutral after `timeout` without a valid frame.
     pub const fn new(timeout: Duration) -> Self {
         Self {
-            buf: [0; FRAME_LEN],
-            len: 0,
-            last_byte: None,
+            framer: GapFramer::new(FRAME_GAP),
             link: Link::new(SbusFrame::NEUTRAL, timeout),
             frames_lost: 0,
         }
@@ -137,24 +133,14 @@ impl SbusReceiver {
 
     /// Feeds one byte received at `now`; returns the frame it completed, if any.
     pub fn push_byte(&mut self, byte: u8, now: Instant) -> Option<Result<SbusFrame, SbusError>> {
-        let gap = self
-            .last_byte
-            .is_none_or(|t| now < t || now - t > FRAME_GAP);
-        self.last_byte = Some(now);
-        if gap && self.len > 0 {
-            self.link.reject();
-            self.len = 0;
+        match self.framer.push(byte, now) {
+            Framed::Frame(frame) => Some(self.push_frame(&frame, now)),
+            Framed::Truncated => {
+                self.link.reject(); // the frame the gap cut short
+                None
+            }
+            Framed::Pending => None,
         }
-        if let Some(slot) = self.buf.get_mut(self.len) {
-            *slot = byte;
-            self.len += 1;
-        }
-        if self.len == FRAME_LEN {
-            self.len = 0;
-            let buf = self.buf;
-            return Some(self.push_frame(&buf, now));
-        }
-        None
     }
 
     /// Feeds a whole frame received at `now`.
