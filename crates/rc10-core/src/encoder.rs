@@ -226,26 +226,47 @@ impl Encoder {
         self.total_counts.rem_euclid(n) as f32 * (360.0 / n as f32)
     }
 
-    /// Output-shaft position in units of `1 / (counts_per_rev · rotor_turns)` of an output turn,
-    /// and that unit's count per output turn. Exact integer arithmetic.
-    fn output_fraction(&self) -> (i128, i128) {
-        let scaled = i128::from(self.total_counts) * i128::from(self.config.gear.output_turns);
+    /// Output-shaft position as whole turns and the remainder in units of
+    /// `1 / (counts_per_rev · rotor_turns)` of a turn, and that unit's count per turn. Exact
+    /// integer arithmetic: `i64` (cheap on a Cortex-M4), or `i128` only if the product could
+    /// overflow, which takes thousands of years of continuous rotation.
+    fn output_position(&self) -> (i64, i64, i64) {
         let per_turn =
-            i128::from(self.config.counts_per_rev) * i128::from(self.config.gear.rotor_turns);
-        (scaled, per_turn)
+            i64::from(self.config.counts_per_rev) * i64::from(self.config.gear.rotor_turns);
+        match self
+            .total_counts
+            .checked_mul(i64::from(self.config.gear.output_turns))
+        {
+            Some(scaled) => (
+                scaled.div_euclid(per_turn),
+                scaled.rem_euclid(per_turn),
+                per_turn,
+            ),
+            None => {
+                let scaled =
+                    i128::from(self.total_counts) * i128::from(self.config.gear.output_turns);
+                let per = i128::from(per_turn);
+                // The quotient fits i64 (it is smaller than total_counts); the remainder is
+                // below per_turn.
+                (
+                    scaled.div_euclid(per) as i64,
+                    scaled.rem_euclid(per) as i64,
+                    per_turn,
+                )
+            }
+        }
     }
 
     /// Whole output-shaft turns since the origin (floor).
     pub fn total_turns(&self) -> i64 {
-        let (scaled, per_turn) = self.output_fraction();
-        scaled.div_euclid(per_turn) as i64
+        self.output_position().0
     }
 
     /// Output-shaft angle within one turn in degrees, [0, 360); exact to f32 rounding however
     /// many turns were made.
     pub fn angle_deg(&self) -> f32 {
-        let (scaled, per_turn) = self.output_fraction();
-        let angle = scaled.rem_euclid(per_turn) as f32 * (360.0 / per_turn as f32);
+        let (_, rem, per_turn) = self.output_position();
+        let angle = rem as f32 * (360.0 / per_turn as f32);
         // Rounding of the last count below a full turn can give exactly 360.0.
         if angle >= 360.0 { 0.0 } else { angle }
     }
@@ -254,7 +275,9 @@ impl Encoder {
     /// single-turn angle, so its only error is f32 rounding of the result (0.01° up to about
     /// 500 turns, 1° up to about 50 000 turns): it never drifts.
     pub fn total_angle_deg(&self) -> f32 {
-        self.total_turns() as f32 * 360.0 + self.angle_deg()
+        let (turns, rem, per_turn) = self.output_position();
+        let within = rem as f32 * (360.0 / per_turn as f32);
+        turns as f32 * 360.0 + within
     }
 
     /// Makes the current position the origin (multi-turn position 0, angle 0).
@@ -360,6 +383,20 @@ mod tests {
         assert_eq!(e.total_counts(), 0);
         e.update(4100).unwrap();
         assert_eq!(e.total_counts(), 100);
+    }
+
+    #[test]
+    fn overflowing_product_falls_back_to_wide_arithmetic() {
+        // total_counts · 187 overflows i64 here; the i128 path must give the same answer as
+        // exact integer math.
+        let mut e = dji(GearRatio::M3508);
+        e.update(0).unwrap();
+        e.total_counts = i64::MAX / 100;
+        let per_turn = 8192i128 * 3591;
+        let scaled = i128::from(e.total_counts) * 187;
+        assert_eq!(i128::from(e.total_turns()), scaled.div_euclid(per_turn));
+        let expect = scaled.rem_euclid(per_turn) as f64 * 360.0 / per_turn as f64;
+        assert!((f64::from(e.angle_deg()) - expect).abs() < 1e-3);
     }
 
     #[test]

@@ -470,10 +470,19 @@ impl CanNode for DjiMotor {
                 (Some(limits), Some(t)) => limits.derating(t),
                 _ => 1.0,
             };
+            // Angles cost integer division; only the angle modes need them.
+            let angles = matches!(
+                s.cascade.mode(),
+                ControlMode::Angle | ControlMode::TotalAngle
+            );
             let measured = Measured {
                 speed_rpm: s.speed_rpm,
-                angle_deg: s.encoder.angle_deg(),
-                total_angle_deg: s.encoder.total_angle_deg(),
+                angle_deg: if angles { s.encoder.angle_deg() } else { 0.0 },
+                total_angle_deg: if angles {
+                    s.encoder.total_angle_deg()
+                } else {
+                    0.0
+                },
             };
             let out = s.cascade.step(&measured, dt_s);
             s.command = saturate(out, self.command_limit() * derate);
