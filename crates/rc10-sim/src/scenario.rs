@@ -1,7 +1,7 @@
 //! Scenarios (motors, targets, faults) and the world loop that runs rc10-core's real bus,
 //! scheduler and drivers against the simulated bus and plants in deterministic virtual time.
 //!
-//! Time advances from event to event in whole microseconds: plant integration every 100 µs,
+//! Time advances from event to event in whole microseconds: plant integration every 200 µs,
 //! the rc10 tick every 1 ms, each ESC's feedback every 1 ms at its own (seeded) phase, and frame
 //! ends on the bus. Received frames are dispatched to rc10 the moment they end on the wire,
 //! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled.
