@@ -7,8 +7,7 @@
 //! (i16); bytes 12–13 mouse buttons; bytes 14–15 the keyboard bit mask; bytes 16–17 the wheel
 //! (11 bits, on newer receivers).
 
-use super::{Framed, GapFramer, Link, Signal, normalize};
-use crate::time::{Duration, Instant};
+use super::{FrameReceiver, ReceiverFrame, normalize};
 use core::fmt;
 
 /// Raw stick range of the DR16.
@@ -209,66 +208,23 @@ impl fmt::Display for DbusError {
 
 impl core::error::Error for DbusError {}
 
-/// A DR16 receiver fed byte by byte (UART RX interrupt) or frame by frame (UART idle-line DMA).
-///
-/// Byte by byte, frames are delimited by the silence between them: a byte arriving more than
-/// 1 ms after the previous one starts a new frame (bytes of a frame are 110 µs apart, frames
-/// 14 ms apart), so a lost byte costs one frame, not all that follow.
-#[derive(Debug, Clone)]
-pub struct DbusReceiver {
-    framer: GapFramer<FRAME_LEN>,
-    link: Link<DbusFrame>,
-}
+/// A DR16 receiver (see [`FrameReceiver`]): `DbusReceiver::new(timeout)`, then
+/// `push_byte` / `push_frame` and `signal(now)`.
+pub type DbusReceiver = FrameReceiver<DbusFrame, FRAME_LEN>;
 
-/// Gap that separates two frames.
-const FRAME_GAP: Duration = Duration::from_millis(1);
+impl ReceiverFrame for DbusFrame {
+    type Error = DbusError;
+    const NEUTRAL: Self = DbusFrame::NEUTRAL;
 
-impl DbusReceiver {
-    /// A receiver that goes neutral after `timeout` without a valid frame (DR16 frames come
-    /// every 14 ms; 100 ms is a sensible timeout).
-    pub const fn new(timeout: Duration) -> Self {
-        Self {
-            framer: GapFramer::new(FRAME_GAP),
-            link: Link::new(DbusFrame::NEUTRAL, timeout),
-        }
-    }
-
-    /// Feeds one byte received at `now`; returns the frame it completed, if any.
-    pub fn push_byte(&mut self, byte: u8, now: Instant) -> Option<Result<DbusFrame, DbusError>> {
-        match self.framer.push(byte, now) {
-            Framed::Frame(frame) => Some(self.push_frame(&frame, now)),
-            Framed::Truncated => {
-                self.link.reject(); // the frame the gap cut short
-                None
-            }
-            Framed::Pending => None,
-        }
-    }
-
-    /// Feeds a whole frame received at `now`.
-    pub fn push_frame(&mut self, bytes: &[u8], now: Instant) -> Result<DbusFrame, DbusError> {
-        let parsed = DbusFrame::parse(bytes);
-        match parsed {
-            Ok(frame) => self.link.accept(frame, now),
-            Err(_) => self.link.reject(),
-        }
-        parsed
-    }
-
-    /// The frame to act on at `now` (neutral if lost).
-    pub fn signal(&self, now: Instant) -> Signal<DbusFrame> {
-        self.link.signal(now)
-    }
-
-    /// The link's counters.
-    pub const fn link(&self) -> &Link<DbusFrame> {
-        &self.link
+    fn parse(bytes: &[u8]) -> Result<Self, DbusError> {
+        DbusFrame::parse(bytes)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::time::{Duration, Instant};
 
     /// Encodes a frame the way the DR16 does (the inverse of `parse`, written independently).
     fn encode(ch: [u16; 4], s_left: u8, s_right: u8, mouse: [i16; 3], keys: u16) -> [u8; 18] {

@@ -166,6 +166,94 @@ impl<const N: usize> GapFramer<N> {
     }
 }
 
+/// A fixed-length receiver frame format (DBUS, SBUS).
+pub trait ReceiverFrame: Copy {
+    /// Why a frame is rejected.
+    type Error;
+    /// What a lost link reports.
+    const NEUTRAL: Self;
+    /// Decodes one frame.
+    fn parse(bytes: &[u8]) -> Result<Self, Self::Error>;
+    /// Whether the receiver itself reports failsafe in this frame.
+    fn failsafe(&self) -> bool {
+        false
+    }
+    /// Whether the receiver reports a frame lost between transmitter and receiver.
+    fn frame_lost(&self) -> bool {
+        false
+    }
+}
+
+/// Gap between the frames of DBUS and SBUS streams: bytes of a frame are about 110 µs apart,
+/// frames 7–14 ms.
+const FRAME_GAP: Duration = Duration::from_millis(1);
+
+/// A receiver of `N`-byte frames of type `F`, fed byte by byte (UART RX interrupt, framed by
+/// line silence) or frame by frame (UART idle-line DMA); see [`dbus::DbusReceiver`] and
+/// [`sbus::SbusReceiver`].
+#[derive(Debug, Clone)]
+pub struct FrameReceiver<F: ReceiverFrame, const N: usize> {
+    framer: GapFramer<N>,
+    link: Link<F>,
+    frames_lost: u32,
+}
+
+impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
+    /// A receiver that goes neutral after `timeout` without a valid frame (100 ms is a sensible
+    /// timeout for both DBUS and SBUS).
+    pub const fn new(timeout: Duration) -> Self {
+        Self {
+            framer: GapFramer::new(FRAME_GAP),
+            link: Link::new(F::NEUTRAL, timeout),
+            frames_lost: 0,
+        }
+    }
+
+    /// Feeds one byte received at `now`; returns the frame it completed, if any.
+    pub fn push_byte(&mut self, byte: u8, now: Instant) -> Option<Result<F, F::Error>> {
+        match self.framer.push(byte, now) {
+            Framed::Frame(frame) => Some(self.push_frame(&frame, now)),
+            Framed::Truncated => {
+                self.link.reject(); // the frame the gap cut short
+                None
+            }
+            Framed::Pending => None,
+        }
+    }
+
+    /// Feeds a whole frame received at `now`. A frame in which the receiver reports failsafe
+    /// sends the outputs neutral at once.
+    pub fn push_frame(&mut self, bytes: &[u8], now: Instant) -> Result<F, F::Error> {
+        let parsed = F::parse(bytes);
+        match &parsed {
+            Ok(frame) if frame.failsafe() => self.link.failsafe(now),
+            Ok(frame) => {
+                if frame.frame_lost() {
+                    self.frames_lost = self.frames_lost.wrapping_add(1);
+                }
+                self.link.accept(*frame, now);
+            }
+            Err(_) => self.link.reject(),
+        }
+        parsed
+    }
+
+    /// The frame to act on at `now` (neutral if lost or in failsafe).
+    pub fn signal(&self, now: Instant) -> Signal<F> {
+        self.link.signal(now)
+    }
+
+    /// The link's counters.
+    pub const fn link(&self) -> &Link<F> {
+        &self.link
+    }
+
+    /// Frames the receiver flagged as lost between transmitter and receiver.
+    pub const fn frames_lost(&self) -> u32 {
+        self.frames_lost
+    }
+}
+
 /// Maps a raw channel value to −1…1 around `center` with `half_range` counts to full scale,
 /// clamped, with a `deadband` (fraction of full scale) around the centre.
 pub fn normalize(raw: u16, center: u16, half_range: u16, deadband: f32) -> f32 {

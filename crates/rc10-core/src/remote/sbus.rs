@@ -5,8 +5,7 @@
 //! bit 2 frame lost, bit 3 failsafe); byte 24 is the footer (0x00, or 0x04/0x14/0x24/0x34 on
 //! receivers that interleave telemetry slots). Channel values run about 172…1811, centre 992.
 
-use super::{Framed, GapFramer, Link, Signal, normalize};
-use crate::time::{Duration, Instant};
+use super::{FrameReceiver, ReceiverFrame, normalize};
 use core::fmt;
 
 /// Bytes in a frame.
@@ -109,75 +108,31 @@ impl fmt::Display for SbusError {
 
 impl core::error::Error for SbusError {}
 
-/// An SBUS receiver fed byte by byte or frame by frame; frames are delimited by the silence
-/// between them (more than 1 ms), and the receiver's own failsafe flag sends the outputs
-/// neutral at once.
-#[derive(Debug, Clone)]
-pub struct SbusReceiver {
-    framer: GapFramer<FRAME_LEN>,
-    link: Link<SbusFrame>,
-    frames_lost: u32,
-}
+/// An SBUS receiver (see [`FrameReceiver`]); the receiver's own failsafe flag sends the
+/// outputs neutral at once, and frames it flags as lost are counted (`frames_lost`).
+pub type SbusReceiver = FrameReceiver<SbusFrame, FRAME_LEN>;
 
-const FRAME_GAP: Duration = Duration::from_millis(1);
+impl ReceiverFrame for SbusFrame {
+    type Error = SbusError;
+    const NEUTRAL: Self = SbusFrame::NEUTRAL;
 
-impl SbusReceiver {
-    /// A receiver that goes neutral after `timeout` without a valid frame.
-    pub const fn new(timeout: Duration) -> Self {
-        Self {
-            framer: GapFramer::new(FRAME_GAP),
-            link: Link::new(SbusFrame::NEUTRAL, timeout),
-            frames_lost: 0,
-        }
+    fn parse(bytes: &[u8]) -> Result<Self, SbusError> {
+        SbusFrame::parse(bytes)
     }
 
-    /// Feeds one byte received at `now`; returns the frame it completed, if any.
-    pub fn push_byte(&mut self, byte: u8, now: Instant) -> Option<Result<SbusFrame, SbusError>> {
-        match self.framer.push(byte, now) {
-            Framed::Frame(frame) => Some(self.push_frame(&frame, now)),
-            Framed::Truncated => {
-                self.link.reject(); // the frame the gap cut short
-                None
-            }
-            Framed::Pending => None,
-        }
+    fn failsafe(&self) -> bool {
+        self.failsafe
     }
 
-    /// Feeds a whole frame received at `now`.
-    pub fn push_frame(&mut self, bytes: &[u8], now: Instant) -> Result<SbusFrame, SbusError> {
-        let parsed = SbusFrame::parse(bytes);
-        match parsed {
-            Ok(frame) if frame.failsafe => self.link.failsafe(now),
-            Ok(frame) => {
-                if frame.frame_lost {
-                    self.frames_lost = self.frames_lost.wrapping_add(1);
-                }
-                self.link.accept(frame, now);
-            }
-            Err(_) => self.link.reject(),
-        }
-        parsed
-    }
-
-    /// The frame to act on at `now` (neutral if lost or in failsafe).
-    pub fn signal(&self, now: Instant) -> Signal<SbusFrame> {
-        self.link.signal(now)
-    }
-
-    /// The link's counters.
-    pub const fn link(&self) -> &Link<SbusFrame> {
-        &self.link
-    }
-
-    /// Frames the receiver flagged as lost between transmitter and receiver.
-    pub const fn frames_lost(&self) -> u32 {
-        self.frames_lost
+    fn frame_lost(&self) -> bool {
+        self.frame_lost
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::time::{Duration, Instant};
 
     /// Encodes a frame (written independently of `parse`: a bit-by-bit packer).
     fn encode(channels: [u16; 16], flags: u8, footer: u8) -> [u8; 25] {
