@@ -77,6 +77,12 @@ impl LowPass {
     pub fn reset(&mut self) {
         self.output = None;
     }
+
+    /// Sets the output to `value` (a non-finite value forgets the state instead), so the next
+    /// sample is filtered from there.
+    pub fn reset_to(&mut self, value: f32) {
+        self.output = value.is_finite().then_some(value);
+    }
 }
 
 /// Slew-rate limiter: the output follows the target at no more than `rate_per_s` units per

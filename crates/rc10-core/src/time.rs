@@ -1,7 +1,9 @@
 //! Control-loop time: turning 64-bit microsecond timestamps into a bounded `dt` in seconds.
 //!
-//! rc10-core never reads a clock. Callers pass the current [`Instant`] (from embassy-time on a
-//! board, from virtual time in the simulator). Differences are taken in integer microseconds
+//! The control logic never reads a clock: callers pass the current [`Instant`] (from
+//! embassy-time on a board, from virtual time in the simulator). The only clock reads in
+//! rc10-core are in the async task shell ([`crate::bus::TickerTicks`] and the receiver's
+//! back-off), which a board needs anyway. Differences are taken in integer microseconds
 //! and only then converted to `f32` seconds, so precision does not degrade with uptime: the
 //! `dt` after 100 days is as exact as the `dt` after one second (RC10_LIB's float timestamps
 //! lost resolution after hours).
@@ -14,7 +16,12 @@ pub use embassy_time::{Duration, Instant};
 /// - First call (or after [`reset`](Self::reset)): returns the nominal period.
 /// - Time going backwards or standing still: returns the nominal period (a clock glitch must
 ///   not produce a zero or negative `dt`).
+/// - A call sooner than half the nominal period after the previous: returns half the nominal
+///   period (a tick that ran late followed by an on-time one must not divide a derivative by
+///   a few microseconds).
 /// - A gap longer than `max`: returns `max`.
+///
+/// So every `dt` lies in `[nominal / 2, max]`.
 ///
 /// ```
 /// use rc10_core::time::{DeltaTime, Duration, Instant};
@@ -22,10 +29,12 @@ pub use embassy_time::{Duration, Instant};
 /// assert_eq!(dt.update(Instant::from_micros(5_000_000)), 0.001); // first call: nominal
 /// assert_eq!(dt.update(Instant::from_micros(5_001_500)), 0.0015);
 /// assert_eq!(dt.update(Instant::from_micros(9_000_000)), 0.02); // gap: bounded
+/// assert_eq!(dt.update(Instant::from_micros(9_000_010)), 0.0005); // burst: bounded
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DeltaTime {
     nominal_us: u64,
+    min_us: u64,
     max_us: u64,
     last: Option<Instant>,
 }
@@ -47,6 +56,11 @@ impl DeltaTime {
         };
         Self {
             nominal_us,
+            min_us: if nominal_us / 2 == 0 {
+                1
+            } else {
+                nominal_us / 2
+            },
             max_us,
             last: None,
         }
@@ -62,7 +76,7 @@ impl DeltaTime {
         let dt_us = match self.last {
             Some(last) if now > last => {
                 let elapsed = now.as_micros() - last.as_micros();
-                elapsed.min(self.max_us)
+                elapsed.clamp(self.min_us, self.max_us)
             }
             _ => self.nominal_us,
         };
@@ -131,6 +145,15 @@ mod tests {
         dt.update(Instant::from_micros(0));
         dt.reset();
         assert_eq!(dt.update(Instant::from_micros(7_000)), 0.001);
+    }
+
+    #[test]
+    fn burst_of_back_to_back_calls_is_bounded_below_by_half_the_period() {
+        let mut dt = dt_1khz();
+        dt.update(Instant::from_micros(0));
+        assert_eq!(dt.update(Instant::from_micros(3)), 0.0005);
+        assert_eq!(dt.update(Instant::from_micros(400)), 0.0005);
+        assert_eq!(dt.update(Instant::from_micros(1500)), 0.0011);
     }
 
     #[test]

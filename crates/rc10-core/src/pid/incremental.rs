@@ -290,6 +290,25 @@ mod tests {
     }
 
     #[test]
+    fn absurd_target_through_td_does_not_latch_the_output() {
+        let mut c = IncrementalPid::new(
+            IncrementalPidConfig::new(1.0, 10.0, 0.0)
+                .with_output_limit(20.0)
+                .with_td(100.0),
+        )
+        .unwrap();
+        c.update(0.0, 0.0, DT);
+        assert_eq!(c.update(3e38, 0.0, DT).output, 20.0);
+        // A sane negative target afterwards must drive the output down to the other limit.
+        let mut out = 20.0;
+        for _ in 0..2000 {
+            out = c.update(-50.0, 0.0, DT).output;
+            assert!(out.is_finite());
+        }
+        assert_eq!(out, -20.0);
+    }
+
+    #[test]
     fn invalid_td_rate_is_rejected() {
         assert_eq!(
             IncrementalPid::new(IncrementalPidConfig::new(1.0, 0.0, 0.0).with_td(0.0)).unwrap_err(),

@@ -190,7 +190,7 @@ impl Pid {
 
     /// One step without feed-forward; see [`update_with_ff`](Self::update_with_ff).
     pub fn update(&mut self, target: f32, measurement: f32, dt_s: f32) -> PidTerms {
-        self.update_with_ff(target, measurement, 0.0, dt_s)
+        self.update_within(target, measurement, 0.0, dt_s, f32::INFINITY)
     }
 
     /// One control step: `target` and `measurement` in the measured unit, `feed_forward` in
@@ -206,10 +206,41 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
     ) -> PidTerms {
+        self.update_within(target, measurement, feed_forward, dt_s, f32::INFINITY)
+    }
+
+    /// [`update_with_ff`](Self::update_with_ff) under an extra output limit that is in force
+    /// now, `|output| ≤ limit` (e.g. an ESC limit lowered by thermal derating or by chassis
+    /// power limiting). The smaller of `limit` and the configured
+    /// [`output_limit`](PidConfig::output_limit) is the *effective* limit, and anti-windup
+    /// works against it: the integral does not grow while the output is held there, and it is
+    /// kept within `±effective limit` (an integral beyond it is effort that cannot be
+    /// applied, and would make the output jump when the limit is lifted). A NaN or negative
+    /// `limit` counts as zero.
+    pub fn update_within(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+    ) -> PidTerms {
         if !(target.is_finite() && measurement.is_finite() && feed_forward.is_finite()) {
             return PidTerms::ZERO;
         }
         let c = self.config;
+        // `max(0)` by comparison: NaN and negative limits become 0.
+        let extra = if limit > 0.0 { limit } else { 0.0 };
+        let out_limit = if extra < c.output_limit {
+            extra
+        } else {
+            c.output_limit
+        };
+        let i_limit = if out_limit < c.integral_limit {
+            out_limit
+        } else {
+            c.integral_limit
+        };
         let raw_error = c.error_mode.diff(target, measurement);
         let error = if raw_error.abs() <= c.deadband {
             0.0
@@ -220,30 +251,42 @@ impl Pid {
 
         let p = saturate(c.kp * error, f32::INFINITY);
 
+        // With kd = 0 the D path is skipped entirely (no divide, no filter).
         let d = match self.prev_measurement {
+            _ if c.kd == 0.0 => 0.0,
             Some(prev) if dt_ok => {
                 let change = c.error_mode.diff(measurement, prev);
                 let raw_d = saturate(-c.kd * change / dt_s, f32::INFINITY);
+                if self.d_filter.output().is_none() {
+                    // Start the filter from "no derivative", so the first sample after a
+                    // reset is smoothed like every other one instead of passing straight
+                    // through.
+                    self.d_filter.reset_to(0.0);
+                }
                 self.d_filter.update(raw_d, dt_s)
             }
             Some(_) => self.d_filter.output().unwrap_or(0.0),
             None => 0.0,
         };
 
-        if dt_ok && c.ki != 0.0 && raw_error.abs() <= c.integral_separation {
+        let in_band = raw_error.abs() <= c.integral_separation;
+        if dt_ok && c.ki != 0.0 && in_band {
+            // Trapezoid over in-band errors only: right after the error re-enters the band the
+            // previous (separated) error is not folded in.
             let prev_error = self.prev_error.unwrap_or(error);
             let increment = c.ki * 0.5 * (error + prev_error) * dt_s;
-            let candidate = saturate(self.integral + increment, c.integral_limit);
+            let candidate = saturate(self.integral + increment, i_limit);
             let unlimited = p + candidate + d + feed_forward;
             let winding_up =
-                unlimited.abs() > c.output_limit && (candidate - self.integral) * unlimited > 0.0;
+                unlimited.abs() > out_limit && (candidate - self.integral) * unlimited > 0.0;
             if !winding_up {
                 self.integral = candidate;
             }
         }
+        self.integral = saturate(self.integral, i_limit);
 
-        let output = saturate(p + self.integral + d + feed_forward, c.output_limit);
-        self.prev_error = Some(error);
+        let output = saturate(p + self.integral + d + feed_forward, out_limit);
+        self.prev_error = in_band.then_some(error);
         self.prev_measurement = Some(measurement);
         self.last = PidTerms {
             p,
@@ -481,11 +524,60 @@ mod tests {
         let d_raw = raw.update(0.0, 1.0, DT).d;
         let d_filt = filt.update(0.0, 1.0, DT).d;
         assert!((d_raw + 1000.0).abs() < 1e-3);
-        // The first filtered sample initialises the filter to the raw value; after that the
-        // filter responds to changes with alpha = dt / (tau + dt) ≈ 0.059.
-        assert!((d_filt + 1000.0).abs() < 1e-3);
+        // The filter starts from "no derivative": tau = 1/(2π·10 Hz) = 15.915 ms, so the first
+        // sample is weighted by alpha = dt / (tau + dt) = 1 / 16.915 = 0.05912.
+        assert!((d_filt + 1000.0 * 0.05912).abs() < 0.05, "{d_filt}");
         let d_filt2 = filt.update(0.0, 1.0, DT).d; // raw derivative now 0
-        assert!((d_filt2 + 1000.0 * (1.0 - 0.0592)).abs() < 1.0, "{d_filt2}");
+        assert!(
+            (d_filt2 + 1000.0 * 0.05912 * (1.0 - 0.05912)).abs() < 0.05,
+            "{d_filt2}"
+        );
+    }
+
+    #[test]
+    fn output_is_the_sum_of_p_i_d_and_ff_with_every_term_nonzero() {
+        // kp 2, ki 100 /s, kd 0.01 s; target 10, measurement 0 then 1 (rising at 1000 /s).
+        let mut c = pid(PidConfig::new(2.0, 100.0, 0.01));
+        c.update_with_ff(10.0, 0.0, 0.5, DT);
+        let t = c.update_with_ff(10.0, 1.0, 0.5, DT);
+        assert!((t.p - 18.0).abs() < 1e-4); // 2 · 9
+        assert!((t.d + 10.0).abs() < 1e-3); // -0.01 · 1 / 0.001: opposes the rise
+        // i: step 1 (10+10)/2·0.001·100 = 1.0; step 2 (10+9)/2·0.001·100 = 0.95.
+        assert!((t.i - 1.95).abs() < 1e-4, "{}", t.i);
+        assert!(
+            (t.output - (18.0 + 1.95 - 10.0 + 0.5)).abs() < 1e-3,
+            "{}",
+            t.output
+        );
+    }
+
+    #[test]
+    fn integral_separation_reentry_integrates_only_in_band_error() {
+        // M3508 speed-loop scale: ki 8 A/(rpm·s), band 50 rpm. A 300 rpm error is separated;
+        // the next step, back at 10 rpm, must add ki·10·dt = 0.08 A, not the trapezoid over
+        // the separated error, ki·(300 + 10)/2·dt = 1.24 A.
+        let mut c = pid(PidConfig::new(0.0, 8.0, 0.0).with_integral_separation(50.0));
+        c.update(300.0, 0.0, DT);
+        assert_eq!(c.integral(), 0.0);
+        let t = c.update(10.0, 0.0, DT);
+        assert!((t.i - 8.0 * 10.0 * DT).abs() < 1e-6, "i = {}", t.i);
+    }
+
+    #[test]
+    fn anti_windup_works_against_a_lower_limit_in_force() {
+        // Derated to 5 A while the loop's own limit is 20 A: the integral must stay within the
+        // 5 A that can be applied, so the command does not jump when the limit is lifted.
+        let mut c = pid(PidConfig::new(0.1, 50.0, 0.0).with_output_limit(20.0));
+        for _ in 0..2000 {
+            let t = c.update_within(100.0, 0.0, 0.0, DT, 5.0);
+            assert!(t.output.abs() <= 5.0);
+        }
+        assert!(c.integral() <= 5.0 + 1e-6, "integral {}", c.integral());
+        // Error reverses as soon as the limit is lifted: the output falls from at most 5 A.
+        let after = c.update_within(-10.0, 0.0, 0.0, DT, 20.0);
+        assert!(after.output < 5.0, "{}", after.output);
+        // A NaN limit counts as zero.
+        assert_eq!(c.update_within(100.0, 0.0, 0.0, DT, f32::NAN).output, 0.0);
     }
 
     proptest! {

@@ -90,6 +90,11 @@ impl TrackingDifferentiator {
                 }
             }
         }
+        if !(x1.is_finite() && x2.is_finite()) {
+            // An absurd (finite) input overflowed the state: start again from the input at
+            // rest rather than carry infinities or NaN into every later call.
+            (x1, x2) = (input, 0.0);
+        }
         self.state = Some((x1, x2));
         (x1, x2)
     }
@@ -98,6 +103,23 @@ impl TrackingDifferentiator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn absurd_finite_input_does_not_latch_the_state() {
+        let mut td = TrackingDifferentiator::new(100.0).unwrap();
+        td.reset(0.0);
+        for _ in 0..3 {
+            let (x1, x2) = td.update(3e38, 0.001);
+            assert!(x1.is_finite() && x2.is_finite());
+        }
+        // Back to a sane input: the tracker follows it again, smoothly and finitely.
+        let mut last = (0.0, 0.0);
+        for _ in 0..200 {
+            last = td.update(100.0, 0.001);
+            assert!(last.0.is_finite() && last.1.is_finite());
+        }
+        assert!((last.0 - 100.0).abs() < 1.0, "{last:?}");
+    }
 
     #[test]
     fn new_rejects_non_positive_rate() {
