@@ -86,12 +86,12 @@ impl MyMotor {
 
 impl CanNode for MyMotor {
     fn bus_usage(&self) -> BusUsage {
-        BusUsage {
-            listen: Some(IdFilter::standard(0x380 + u16::from(self.id))),
-            feedback_hz: 1000,
-            command_frames_per_tick: 1,
-            ..BusUsage::NONE
-        }
+        // Every ID it listens on and every ID it sends on: the bus checks them against all
+        // other nodes (and an STM32 adapter builds its acceptance filters from them).
+        let id = u16::from(self.id);
+        BusUsage::NONE
+            .listening(IdFilter::standard(0x380 + id), 1000)
+            .sending(IdFilter::standard(0x300 + id), 1)
     }
 
     fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {

@@ -182,15 +182,55 @@ impl Encoder {
         &self.config
     }
 
-    /// Feeds one raw reading. An out-of-range count is rejected and changes nothing.
+    /// Feeds one raw reading, assuming the rotor turned less than half a turn since the
+    /// previous one. An out-of-range count is rejected and changes nothing.
     pub fn update(&mut self, raw: u16) -> Result<(), EncoderError> {
+        self.update_predicted(raw, 0.0)
+    }
+
+    /// Feeds one raw reading, given a prediction of how many counts the rotor turned since the
+    /// previous reading (rotor speed × elapsed time; positive forward).
+    ///
+    /// Of all the steps consistent with the raw count (`d + k · counts_per_rev`), the one
+    /// nearest the prediction is taken. So a rotor that turned more than half a turn between
+    /// two readings (frames lost at high speed: an M2006 above 417 output rpm loses a whole
+    /// rotor turn to one lost frame under the half-turn rule) is still counted exactly,
+    /// provided the prediction is within half a turn of the truth. A prediction of 0 is the
+    /// half-turn rule; a non-finite one is treated as 0. An out-of-range count is rejected
+    /// and changes nothing.
+    ///
+    /// ```
+    /// use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
+    /// let mut enc = Encoder::new(EncoderConfig::dji(GearRatio::M2006)).unwrap();
+    /// enc.update(0).unwrap();
+    /// // 3 ms at 18 000 rotor rpm (two frames lost): 2.7 rotor turns = 22 118.4 counts.
+    /// enc.update_predicted((22_118 % 8192) as u16, 22_118.4).unwrap();
+    /// assert_eq!(enc.total_counts(), 22_118);
+    /// ```
+    pub fn update_predicted(
+        &mut self,
+        raw: u16,
+        predicted_counts: f32,
+    ) -> Result<(), EncoderError> {
         let n = i64::from(self.config.counts_per_rev);
         if i64::from(raw) >= n {
             return Err(EncoderError::OutOfRange { raw });
         }
         match self.last_raw {
             Some(last) => {
-                self.total_counts += wrap_counts(i64::from(raw) - i64::from(last), n);
+                let step = wrap_counts(i64::from(raw) - i64::from(last), n);
+                let off = if predicted_counts.is_finite() {
+                    predicted_counts - step as f32
+                } else {
+                    0.0
+                };
+                let turns = if off.abs() * 2.0 < n as f32 {
+                    0 // the usual case: the prediction agrees with the half-turn rule
+                } else {
+                    // Bounded so that even an absurd prediction cannot overflow the count.
+                    libm::roundf(off / n as f32).clamp(-1.0e6, 1.0e6) as i64
+                };
+                self.total_counts = self.total_counts.saturating_add(step + turns * n);
             }
             None => {
                 self.total_counts = match self.config.origin {
@@ -293,6 +333,33 @@ impl Encoder {
         }
     }
 
+    /// Homing: declares the present position to be the output-shaft multi-turn angle
+    /// `angle_deg` (rounded to the nearest rotor count). For an absolute origin the zero
+    /// offset moves with it, so a later [`reset`](Self::reset) keeps the new origin. Returns
+    /// `false` (and changes nothing) with no reading yet or a non-finite or absurdly large
+    /// angle.
+    pub fn set_total_angle_deg(&mut self, angle_deg: f32) -> bool {
+        let Some(raw) = self.last_raw else {
+            return false;
+        };
+        let n = i64::from(self.config.counts_per_rev);
+        // Rotor counts per output degree, in f64: this runs once per homing, not per tick.
+        let counts_per_deg = n as f64 * f64::from(self.config.gear.rotor_turns)
+            / (f64::from(self.config.gear.output_turns) * 360.0);
+        let counts = libm::round(f64::from(angle_deg) * counts_per_deg);
+        if !counts.is_finite() || counts.abs() > 1e15 {
+            return false;
+        }
+        self.total_counts = counts as i64;
+        if let Origin::Absolute { .. } = self.config.origin {
+            let offset = (i64::from(raw) - self.total_counts).rem_euclid(n);
+            self.config.origin = Origin::Absolute {
+                zero_offset_counts: u16::try_from(offset).unwrap_or(0),
+            };
+        }
+        true
+    }
+
     /// Forgets the readings: the next one starts again from the origin (for an absolute
     /// encoder, the true angle; for a power-on encoder, 0).
     pub fn reset(&mut self) {
@@ -313,6 +380,90 @@ mod tests {
 
     fn dji(gear: GearRatio) -> Encoder {
         Encoder::new(EncoderConfig::dji(gear)).unwrap()
+    }
+
+    /// Simulates a rotor at constant `rotor_rpm` read every 1 ms, with `lost` frames dropped
+    /// after every received one, unwrapping with the speed × gap prediction.
+    fn run_with_losses(gear: GearRatio, rotor_rpm: f64, lost: u32, frames: u32) -> (i64, i64) {
+        let mut enc = dji(gear);
+        let counts_per_ms = rotor_rpm / 60.0 * 8192.0 / 1000.0;
+        let mut true_counts = 0.0f64;
+        enc.update(0).unwrap();
+        for _ in 0..frames {
+            let gap_ms = f64::from(lost + 1);
+            true_counts += counts_per_ms * gap_ms;
+            let raw = (true_counts.round() as i64).rem_euclid(8192) as u16;
+            enc.update_predicted(raw, (counts_per_ms * gap_ms) as f32)
+                .unwrap();
+        }
+        (enc.total_counts(), true_counts.round() as i64)
+    }
+
+    #[test]
+    fn m2006_at_full_speed_survives_one_to_three_lost_frames() {
+        // M2006 no-load: 500 output rpm · 36 = 18 000 rotor rpm = 0.3 rotor turns per ms.
+        for lost in 1..=3 {
+            let (counted, truth) = run_with_losses(GearRatio::M2006, 18_000.0, lost, 500);
+            assert_eq!(counted, truth, "{lost} lost frames");
+        }
+        // The half-turn rule alone loses a whole turn per gap: the prediction is what helps.
+        let mut plain = dji(GearRatio::M2006);
+        plain.update(0).unwrap();
+        plain
+            .update(((0.6f64 * 8192.0) as i64 % 8192) as u16)
+            .unwrap();
+        assert_eq!(plain.total_counts(), (0.6f64 * 8192.0) as i64 - 8192);
+    }
+
+    #[test]
+    fn m3508_at_full_speed_survives_one_to_three_lost_frames() {
+        // M3508 with the C620: 482 output rpm · 3591/187 ≈ 9 256 rotor rpm.
+        for lost in 1..=3 {
+            let (counted, truth) = run_with_losses(GearRatio::M3508, 9_256.0, lost, 500);
+            assert_eq!(counted, truth, "{lost} lost frames");
+        }
+        // Backwards too.
+        let (counted, truth) = run_with_losses(GearRatio::M3508, -9_256.0, 3, 500);
+        assert_eq!(counted, truth);
+    }
+
+    #[test]
+    fn absurd_prediction_cannot_overflow() {
+        let mut enc = dji(GearRatio::DIRECT);
+        enc.update(0).unwrap();
+        enc.update_predicted(10, f32::MAX).unwrap();
+        enc.update_predicted(20, f32::NAN).unwrap();
+        assert!(enc.total_counts() > 0);
+    }
+
+    #[test]
+    fn homing_sets_the_total_angle_and_keeps_counting_from_it() {
+        let mut enc = dji(GearRatio::M3508);
+        assert!(!enc.set_total_angle_deg(0.0)); // no reading yet
+        enc.update(1000).unwrap();
+        enc.update(3000).unwrap();
+        assert!(enc.set_total_angle_deg(90.0));
+        // 90° of output = 8192 · 3591 / (187 · 4) = 39 328.17 → 39 328 rotor counts.
+        assert_eq!(enc.total_counts(), 39_328);
+        assert!((enc.total_angle_deg() - 90.0).abs() < 0.01);
+        enc.update(3100).unwrap();
+        assert_eq!(enc.total_counts(), 39_428);
+        assert!(!enc.set_total_angle_deg(f32::NAN));
+    }
+
+    #[test]
+    fn homing_an_absolute_encoder_moves_its_zero_offset() {
+        let mut enc = Encoder::new(EncoderConfig::dji(GearRatio::DIRECT).with_origin(
+            Origin::Absolute {
+                zero_offset_counts: 0,
+            },
+        ))
+        .unwrap();
+        enc.update(2048).unwrap(); // 90°
+        assert!(enc.set_total_angle_deg(0.0));
+        enc.reset();
+        enc.update(2048).unwrap();
+        assert_eq!(enc.total_counts(), 0); // still zero after a restart
     }
 
     #[test]

@@ -6,13 +6,17 @@
 //! `&'static dyn CanNode`, by the scheduler task, the receiver task and application tasks, and
 //! keeps its mutable state behind its own short critical section (see [`crate::motor`]).
 
-use crate::can::{CanFrame, IdFilter};
+use crate::can::{CanFrame, Id, IdFilter, RawId};
 use crate::time::Instant;
 use core::fmt;
 
 /// Most frames one tick can pack on one bus. At 1 Mbit/s one millisecond carries at most
 /// nine 8-byte frames, so 16 leaves room for slower ticks without being a real limit.
 pub const MAX_FRAMES_PER_TICK: usize = 16;
+
+/// Most ID filters one [`IdSet`] holds (a VESC listening to all five of its status packets
+/// needs five).
+pub const ID_SET_CAPACITY: usize = 6;
 
 /// A two-byte slot in a shared command frame: DJI ESCs read their current/voltage command
 /// from bytes `2·index` and `2·index + 1` of a frame with a standard ID (0x200, 0x1FF, …).
@@ -42,37 +46,187 @@ impl CommandSlot {
     pub const fn index(&self) -> u8 {
         self.index
     }
+
+    /// The filter that matches exactly this slot's frame ID.
+    pub const fn frame_filter(&self) -> IdFilter {
+        IdFilter::standard(self.id)
+    }
 }
 
-/// What a node does on the bus, declared once at registration so the bus can check ID
-/// conflicts and the frame budget before anything runs.
+/// A small fixed set of ID filters: the IDs a node listens on, or the IDs it sends whole
+/// frames on. `const`-constructible, so a node's declaration can be a constant.
+///
+/// Adding beyond [`ID_SET_CAPACITY`] filters does not drop anything silently: the set
+/// remembers that it overflowed and registration refuses the node
+/// ([`RegisterError::TooManyIds`](crate::bus::RegisterError::TooManyIds)).
+///
+/// ```
+/// use rc10_core::can::{CanFrame, IdFilter};
+/// use rc10_core::node::IdSet;
+/// const FEEDBACK: IdSet = IdSet::EMPTY.with(IdFilter::standard(0x381)).with(IdFilter::standard(0x391));
+/// assert!(FEEDBACK.matches(CanFrame::standard(0x391, &[]).unwrap().id()));
+/// assert!(!FEEDBACK.matches(CanFrame::standard(0x392, &[]).unwrap().id()));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IdSet {
+    filters: [IdFilter; ID_SET_CAPACITY],
+    len: u8,
+    overflowed: bool,
+}
+
+impl IdSet {
+    /// No IDs.
+    pub const EMPTY: Self = Self {
+        filters: [IdFilter::standard(0); ID_SET_CAPACITY],
+        len: 0,
+        overflowed: false,
+    };
+
+    /// A set of one filter.
+    pub const fn one(filter: IdFilter) -> Self {
+        Self::EMPTY.with(filter)
+    }
+
+    /// This set plus `filter` (marked overflowed if it is already full).
+    #[must_use]
+    pub const fn with(mut self, filter: IdFilter) -> Self {
+        let at = self.len as usize;
+        if at < ID_SET_CAPACITY {
+            // In bounds (checked on the line above); `get_mut` is not callable in a const fn.
+            #[allow(clippy::indexing_slicing)]
+            {
+                self.filters[at] = filter;
+            }
+            self.len += 1;
+        } else {
+            self.overflowed = true;
+        }
+        self
+    }
+
+    /// The filters.
+    pub fn filters(&self) -> &[IdFilter] {
+        self.filters.get(..usize::from(self.len)).unwrap_or(&[])
+    }
+
+    /// Whether no filter is in the set.
+    pub const fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Whether more filters were added than the set holds.
+    pub const fn overflowed(&self) -> bool {
+        self.overflowed
+    }
+
+    /// Whether `id` passes some filter of the set.
+    pub fn matches(&self, id: Id) -> bool {
+        self.filters().iter().any(|f| f.matches(id))
+    }
+
+    /// Whether any filter of the set uses extended IDs.
+    pub fn any_extended(&self) -> bool {
+        self.filters().iter().any(|f| f.extended)
+    }
+
+    /// An ID that passes both a filter of this set and `filter`, if there is one.
+    pub fn common_id(&self, filter: &IdFilter) -> Option<RawId> {
+        self.filters().iter().find_map(|f| f.common_id(filter))
+    }
+
+    /// An ID that passes a filter of this set and a filter of `other`, if there is one.
+    pub fn common_id_with(&self, other: &IdSet) -> Option<RawId> {
+        other.filters().iter().find_map(|f| self.common_id(f))
+    }
+}
+
+impl Default for IdSet {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+/// What a node does on the bus, declared once at registration so the bus can check every ID
+/// against every other node's, the transport's TX depth and the frame budget before anything
+/// runs (ARCHITECTURE.md, property 6).
+///
+/// A node declares *every* ID it listens on and *every* ID it transmits on:
+/// - [`listen`](Self::listen): where its feedback arrives (also what the default
+///   [`CanNode::matches_frame`] claims, and what a hardware acceptance filter is built from);
+/// - [`command_slot`](Self::command_slot): a two-byte slot in a shared command frame (DJI);
+/// - [`sends`](Self::sends) and [`frames_per_tick`](Self::frames_per_tick): whole frames it
+///   pushes every tick, on IDs from `sends` (VESC, Damiao, your own device).
+///
+/// Build it with the `const` chainable setters:
+///
+/// ```
+/// use rc10_core::can::IdFilter;
+/// use rc10_core::node::BusUsage;
+/// // Command on 0x301 every tick, feedback on 0x381 at 1 kHz.
+/// const USAGE: BusUsage = BusUsage::NONE
+///     .listening(IdFilter::standard(0x381), 1000)
+///     .sending(IdFilter::standard(0x301), 1);
+/// assert_eq!(USAGE.frames_per_tick, 1);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BusUsage {
-    /// The IDs this node's feedback arrives on (`None`: it receives nothing).
-    pub listen: Option<IdFilter>,
-    /// Feedback frames per second the node's device sends (1000 for a DJI ESC).
+    /// The IDs this node's feedback arrives on (empty: it receives nothing).
+    pub listen: IdSet,
+    /// Feedback frames per second the device sends on all of `listen` together (1000 for a
+    /// DJI ESC), for the frame budget.
     pub feedback_hz: u32,
-    /// Whether the feedback frames use extended IDs (for the frame budget).
-    pub feedback_extended: bool,
     /// A slot in a shared command frame this node writes every tick.
     pub command_slot: Option<CommandSlot>,
-    /// Whole frames this node pushes per tick besides its slot (VESC, DM: 1).
-    pub command_frames_per_tick: u8,
-    /// Whether those whole frames use extended IDs (for the frame budget).
-    pub command_extended: bool,
+    /// The IDs this node's whole frames go out on.
+    pub sends: IdSet,
+    /// Whole frames this node pushes per tick besides its slot (VESC, Damiao: 1). Each must
+    /// carry an ID from [`sends`](Self::sends).
+    pub frames_per_tick: u8,
 }
 
 impl BusUsage {
     /// A node that neither listens nor sends.
     pub const NONE: Self = Self {
-        listen: None,
+        listen: IdSet::EMPTY,
         feedback_hz: 0,
-        feedback_extended: false,
         command_slot: None,
-        command_frames_per_tick: 0,
-        command_extended: false,
+        sends: IdSet::EMPTY,
+        frames_per_tick: 0,
     };
+
+    /// Adds a listen filter and `hz` feedback frames per second arriving through it.
+    #[must_use]
+    pub const fn listening(mut self, filter: IdFilter, hz: u32) -> Self {
+        self.listen = self.listen.with(filter);
+        self.feedback_hz = self.feedback_hz.saturating_add(hz);
+        self
+    }
+
+    /// Sets the shared-frame command slot.
+    #[must_use]
+    pub const fn with_slot(mut self, slot: CommandSlot) -> Self {
+        self.command_slot = Some(slot);
+        self
+    }
+
+    /// Adds the IDs in `filter` to those whole frames go out on, and `frames` to the whole
+    /// frames pushed per tick.
+    #[must_use]
+    pub const fn sending(mut self, filter: IdFilter, frames: u8) -> Self {
+        self.sends = self.sends.with(filter);
+        self.frames_per_tick = self.frames_per_tick.saturating_add(frames);
+        self
+    }
+
+    /// Every ID this node transmits on: its whole-frame IDs and its slot frame's ID.
+    pub fn transmit_ids(&self) -> IdSet {
+        match self.command_slot {
+            Some(slot) => self.sends.with(slot.frame_filter()),
+            None => self.sends,
+        }
+    }
 }
 
 /// Why a node did not accept a frame it claimed.
@@ -120,6 +274,8 @@ impl core::error::Error for FrameError {}
 #[derive(Debug, Clone, Default)]
 pub struct TxBatch {
     frames: heapless::Vec<CanFrame, MAX_FRAMES_PER_TICK>,
+    /// Bit `i` set: frame `i` is a shared slot frame (only these take slot writes).
+    slot_frames: u16,
     overflowed: u32,
 }
 
@@ -128,6 +284,7 @@ impl TxBatch {
     pub const fn new() -> Self {
         Self {
             frames: heapless::Vec::new(),
+            slot_frames: 0,
             overflowed: 0,
         }
     }
@@ -135,22 +292,31 @@ impl TxBatch {
     /// Writes `value` big-endian into `slot`, creating the zero-filled command frame if this is
     /// the first slot written for its ID this tick. Returns `false` (and counts an overflow) if
     /// the batch has no room for a new frame.
+    ///
+    /// Slot writes merge only into slot frames: a whole frame [`push`](Self::push)ed on the
+    /// same ID is never written into (registration rejects that clash; should it happen
+    /// anyway, the two frames stay separate).
     pub fn write_slot(&mut self, slot: CommandSlot, value: i16) -> bool {
         let at = 2 * usize::from(slot.index);
+        let slot_frames = self.slot_frames;
         let existing = self
             .frames
             .iter_mut()
-            .find(|f| !f.is_extended() && f.raw_id() == u32::from(slot.id) && f.dlc() == 8);
+            .enumerate()
+            .find(|(i, f)| slot_frames & (1 << i) != 0 && f.raw_id() == u32::from(slot.id))
+            .map(|(_, f)| f);
         let frame = match existing {
             Some(f) => f,
             None => {
                 let Some(fresh) = CanFrame::standard(slot.id, &[0; 8]) else {
                     return false; // unreachable: CommandSlot::new checked the ID
                 };
+                let index = self.frames.len();
                 if self.frames.push(fresh).is_err() {
                     self.overflowed += 1;
                     return false;
                 }
+                self.slot_frames |= 1 << index;
                 match self.frames.last_mut() {
                     Some(f) => f,
                     None => return false,
@@ -183,6 +349,7 @@ impl TxBatch {
     /// Empties the batch for the next tick.
     pub fn clear(&mut self) {
         self.frames.clear();
+        self.slot_frames = 0;
         self.overflowed = 0;
     }
 }
@@ -203,9 +370,7 @@ pub trait CanNode: Sync {
     /// Whether a received frame is this node's feedback. The default uses
     /// [`BusUsage::listen`].
     fn matches_frame(&self, frame: &CanFrame) -> bool {
-        self.bus_usage()
-            .listen
-            .is_some_and(|f| f.matches(frame.id()))
+        self.bus_usage().listen.matches(frame.id())
     }
 
     /// Parses a frame this node claimed, received at `now`. Latest value wins: nothing queues.
@@ -239,6 +404,58 @@ mod tests {
         assert_eq!(ids, vec![0x1FF, 0x200]);
         assert_eq!(b.frames()[0].data(), &[1, 2, 0, 0, 5, 6, 0, 0]);
         assert_eq!(b.frames()[1].data(), &[3, 4, 0, 0, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn slot_write_never_merges_into_a_whole_frame_on_the_same_id() {
+        // A (misconfigured) Damiao motor on CAN ID 0x200 pushed its MIT frame first: the C620
+        // slot must not overwrite its bytes, nor may the C620s read its fields as currents.
+        let mut b = TxBatch::new();
+        let mit = CanFrame::standard(0x200, &[0x7F, 0xFF, 0x7F, 0xF0, 0, 0, 0x07, 0xFF]).unwrap();
+        b.push(mit).unwrap();
+        b.write_slot(CommandSlot::new(0x200, 0).unwrap(), 0x0102);
+        b.write_slot(CommandSlot::new(0x200, 1).unwrap(), 0x0304);
+        assert_eq!(b.frames().len(), 2);
+        assert_eq!(b.frames()[0], mit);
+        assert_eq!(b.frames()[1].data(), &[1, 2, 3, 4, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn id_set_overflow_is_remembered_not_dropped_silently() {
+        let mut s = IdSet::EMPTY;
+        for i in 0..ID_SET_CAPACITY as u16 {
+            s = s.with(IdFilter::standard(0x100 + i));
+        }
+        assert!(!s.overflowed());
+        s = s.with(IdFilter::standard(0x200));
+        assert!(s.overflowed());
+        assert_eq!(s.filters().len(), ID_SET_CAPACITY);
+    }
+
+    #[test]
+    fn transmit_ids_include_the_slot_frame() {
+        let u = BusUsage::NONE
+            .with_slot(CommandSlot::new(0x1FF, 2).unwrap())
+            .sending(IdFilter::extended(0x0103), 1);
+        let ids = u.transmit_ids();
+        assert!(ids.matches(CanFrame::standard(0x1FF, &[]).unwrap().id()));
+        assert!(ids.matches(CanFrame::extended(0x0103, &[]).unwrap().id()));
+        assert!(!ids.matches(CanFrame::standard(0x200, &[]).unwrap().id()));
+    }
+
+    #[test]
+    fn common_id_of_masked_and_exact_filters() {
+        let vesc = IdFilter::extended_masked(0x07, 0xFF);
+        let exact = IdFilter::extended(0x0907);
+        assert_eq!(
+            vesc.common_id(&exact),
+            Some(RawId {
+                id: 0x0907,
+                extended: true
+            })
+        );
+        assert_eq!(vesc.common_id(&IdFilter::extended(0x0908)), None);
+        assert_eq!(vesc.common_id(&IdFilter::standard(0x007)), None);
     }
 
     #[test]

@@ -550,7 +550,7 @@ fn motor_spec(n: usize, m: &FileMotor) -> Result<MotorSpec, FileError> {
         ));
     }
     let l = m.load;
-    if !(l.inertia_kg_m2.is_finite() && l.inertia_kg_m2 >= 0.0) || !l.torque_nm.is_finite() {
+    if !(l.inertia_kg_m2.is_finite() && l.inertia_kg_m2 >= 0.0 && l.torque_nm.is_finite()) {
         return Err(invalid(
             format!("motor[{n}].load"),
             "inertia must be ≥ 0 and torques finite",

@@ -544,7 +544,7 @@ pub fn run_with_progress(
                             true_rpm: esc.speed_rpm(),
                             true_total_deg: esc.total_angle_deg(),
                             measured_rpm: s.speed_rpm,
-                            measured_total_deg: s.total_angle_deg,
+                            measured_total_deg: s.total_angle_deg.unwrap_or(0.0),
                             command: s.command,
                             current_amps: esc.current_amps(),
                             temperature_c: esc.temperature_c(),

@@ -23,12 +23,13 @@
 //! and the simulator call directly with virtual time. [`run_scheduler`] and [`run_receiver`]
 //! are thin async loops over them for Embassy tasks.
 
+use crate::can::RawId;
 use crate::can::stats::RateWindow;
 use crate::can::{
     BusRates, BusStats, CanFrame, CanReceive, CanTransmit, ErrorState, ReceiveError, SendError,
     timing,
 };
-use crate::node::{CanNode, TxBatch};
+use crate::node::{CanNode, CommandSlot, MAX_FRAMES_PER_TICK, TxBatch};
 use crate::time::{DeltaTime, Duration, Instant};
 use core::cell::RefCell;
 use core::fmt;
@@ -49,16 +50,28 @@ pub struct BusConfig {
     pub max_load_percent: f32,
     /// Window over which [`Bus::rates`] are computed.
     pub rate_window: Duration,
+    /// Frames the transport can hold for sending at once: 3 on an STM32G4 FDCAN (its TX
+    /// buffers), more for a transport with a software queue. Registration refuses nodes whose
+    /// frames per tick would not all fit, so no node's frame is refused every tick.
+    pub tx_depth: u8,
 }
 
 impl BusConfig {
-    /// 1 Mbit/s, 1 kHz tick, 90 % registration limit, 1 s rate window.
+    /// 1 Mbit/s, 1 kHz tick, 90 % registration limit, 1 s rate window, 3 TX buffers.
     pub const DEFAULT: Self = Self {
         bitrate_bps: 1_000_000,
         tick_period: Duration::from_millis(1),
         max_load_percent: 90.0,
         rate_window: Duration::from_secs(1),
+        tx_depth: 3,
     };
+
+    /// Sets [`tx_depth`](Self::tx_depth).
+    #[must_use]
+    pub const fn with_tx_depth(mut self, frames: u8) -> Self {
+        self.tx_depth = frames;
+        self
+    }
 }
 
 impl Default for BusConfig {
@@ -73,6 +86,9 @@ impl Default for BusConfig {
 pub struct FrameBudget {
     /// Frames per tick: feedback plus command frames.
     pub frames_per_tick: f32,
+    /// Command frames the bus sends per tick (shared slot frames plus whole frames): what
+    /// must fit [`BusConfig::tx_depth`].
+    pub command_frames_per_tick: u32,
     /// Load in percent with unstuffed 8-byte frames.
     pub nominal_load_percent: f32,
     /// Load in percent with worst-case stuffing.
@@ -101,22 +117,57 @@ pub enum BudgetLevel {
     Marginal,
 }
 
-/// Why a node could not be registered.
+/// Why a node could not be registered. Every variant names what clashed, so the message
+/// says which IDs to change.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RegisterError {
     /// The bus already holds its capacity (`N`) of nodes.
     Full,
+    /// The node declared more ID filters than an [`IdSet`](crate::node::IdSet) holds.
+    TooManyIds,
     /// The node's feedback IDs overlap those of the node registered at `existing` (e.g. an
     /// M3508 with id 5 and a GM6020 with id 1 both answer on 0x205).
     FeedbackConflict {
         /// Index of the node already registered.
         existing: usize,
+        /// An ID both listen on.
+        id: RawId,
     },
     /// The node writes the same command slot as the node registered at `existing`.
     SlotConflict {
         /// Index of the node already registered.
         existing: usize,
+        /// The slot both write.
+        slot: CommandSlot,
+    },
+    /// The node and the node registered at `existing` would both send frames on `id`: two
+    /// whole-frame senders, or a whole frame on the ID of a shared slot frame (which would
+    /// otherwise be merged with, or sent next to, the DJI slot frame).
+    SendConflict {
+        /// Index of the node already registered.
+        existing: usize,
+        /// The ID both send on.
+        id: RawId,
+    },
+    /// A node would transmit on an ID another node (or itself) receives feedback on: the
+    /// device answering on that ID and the MCU would both send it.
+    CommandOnFeedbackId {
+        /// Index of the sending node (the new node's index is `nodes().len()`).
+        sender: usize,
+        /// Index of the listening node.
+        listener: usize,
+        /// The ID.
+        id: RawId,
+    },
+    /// With this node the bus would send `frames_per_tick` command frames every tick, more
+    /// than the transport's [`BusConfig::tx_depth`] buffers hold: some node would be refused
+    /// every tick. Use another bus (or a transport with a deeper queue).
+    TxDepth {
+        /// Command frames per tick with this node.
+        frames_per_tick: u32,
+        /// Frames the transport holds.
+        tx_depth: u8,
     },
     /// With this node the bus would need `load_percent` of its capacity, above
     /// [`BusConfig::max_load_percent`].
@@ -130,12 +181,34 @@ impl fmt::Display for RegisterError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Full => f.write_str("bus registry full"),
-            Self::FeedbackConflict { existing } => {
-                write!(f, "feedback ID conflicts with node {existing}")
+            Self::TooManyIds => f.write_str("node declares more ID filters than fit an IdSet"),
+            Self::FeedbackConflict { existing, id } => {
+                write!(f, "feedback ID {id} is also node {existing}'s")
             }
-            Self::SlotConflict { existing } => {
-                write!(f, "command slot conflicts with node {existing}")
+            Self::SlotConflict { existing, slot } => write!(
+                f,
+                "command slot {} of frame 0x{:03X} is also node {existing}'s",
+                slot.index(),
+                slot.id()
+            ),
+            Self::SendConflict { existing, id } => {
+                write!(f, "node {existing} also sends on {id}")
             }
+            Self::CommandOnFeedbackId {
+                sender,
+                listener,
+                id,
+            } => write!(
+                f,
+                "node {sender} would send on {id}, where node {listener} receives feedback"
+            ),
+            Self::TxDepth {
+                frames_per_tick,
+                tx_depth,
+            } => write!(
+                f,
+                "{frames_per_tick} command frames per tick do not fit {tx_depth} TX buffers"
+            ),
             Self::FrameBudget { load_percent } => {
                 write!(f, "bus would be {load_percent:.0} % loaded")
             }
@@ -156,7 +229,9 @@ impl core::error::Error for RegisterError {}
 /// let yaw = DjiMotor::gm6020_voltage(1).unwrap(); // also answers on 0x205
 /// let mut builder = BusBuilder::<4>::new();
 /// builder.register(&wheel).unwrap();
-/// assert_eq!(builder.register(&yaw), Err(RegisterError::FeedbackConflict { existing: 0 }));
+/// let err = builder.register(&yaw).unwrap_err();
+/// assert!(matches!(err, RegisterError::FeedbackConflict { existing: 0, .. }));
+/// assert_eq!(err.to_string(), "feedback ID 0x205 is also node 0's");
 /// let bus = builder.build();
 /// assert_eq!(bus.nodes().len(), 1);
 /// ```
@@ -180,20 +255,69 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
     }
 
     /// Adds `node`, or says why it cannot be added (the builder is then unchanged).
+    ///
+    /// Checks, against every node already registered and against the node itself: no shared
+    /// feedback ID, no shared command slot, no two senders on one ID (whole frames, or a whole
+    /// frame on a slot frame's ID), no transmission on an ID anyone listens on; then that all
+    /// command frames of a tick fit [`BusConfig::tx_depth`] and the load fits
+    /// [`BusConfig::max_load_percent`].
     pub fn register(&mut self, node: &'a dyn CanNode) -> Result<(), RegisterError> {
-        let usage = node.bus_usage();
+        if self.nodes.is_full() {
+            return Err(RegisterError::Full);
+        }
+        let mine = node.bus_usage();
+        if mine.listen.overflowed() || mine.sends.overflowed() {
+            return Err(RegisterError::TooManyIds);
+        }
+        let me = self.nodes.len();
+        let my_tx = mine.transmit_ids();
+        if let Some(id) = mine.listen.common_id_with(&my_tx) {
+            return Err(RegisterError::CommandOnFeedbackId {
+                sender: me,
+                listener: me,
+                id,
+            });
+        }
         for (i, other) in self.nodes.iter().enumerate() {
             let theirs = other.bus_usage();
-            if let (Some(a), Some(b)) = (usage.listen, theirs.listen)
-                && a.overlaps(&b)
-            {
-                return Err(RegisterError::FeedbackConflict { existing: i });
+            let their_tx = theirs.transmit_ids();
+            if let Some(id) = mine.listen.common_id_with(&theirs.listen) {
+                return Err(RegisterError::FeedbackConflict { existing: i, id });
             }
-            if usage.command_slot.is_some() && usage.command_slot == theirs.command_slot {
-                return Err(RegisterError::SlotConflict { existing: i });
+            if let Some(slot) = mine.command_slot
+                && Some(slot) == theirs.command_slot
+            {
+                return Err(RegisterError::SlotConflict { existing: i, slot });
+            }
+            let send_clash = mine
+                .sends
+                .common_id_with(&their_tx)
+                .or_else(|| theirs.sends.common_id_with(&my_tx));
+            if let Some(id) = send_clash {
+                return Err(RegisterError::SendConflict { existing: i, id });
+            }
+            if let Some(id) = my_tx.common_id_with(&theirs.listen) {
+                return Err(RegisterError::CommandOnFeedbackId {
+                    sender: me,
+                    listener: i,
+                    id,
+                });
+            }
+            if let Some(id) = their_tx.common_id_with(&mine.listen) {
+                return Err(RegisterError::CommandOnFeedbackId {
+                    sender: i,
+                    listener: me,
+                    id,
+                });
             }
         }
         let budget = self.budget_with(Some(node));
+        if budget.command_frames_per_tick > u32::from(self.config.tx_depth) {
+            return Err(RegisterError::TxDepth {
+                frames_per_tick: budget.command_frames_per_tick,
+                tx_depth: self.config.tx_depth,
+            });
+        }
         if budget.nominal_load_percent > self.config.max_load_percent {
             return Err(RegisterError::FrameBudget {
                 load_percent: budget.nominal_load_percent,
@@ -233,7 +357,8 @@ fn frame_budget<'n>(
     config: &BusConfig,
 ) -> FrameBudget {
     let tick_s = crate::time::micros_to_s(config.tick_period.as_micros().max(1));
-    let mut command_ids: heapless::Vec<u16, 16> = heapless::Vec::new();
+    let mut slot_ids: heapless::Vec<u16, MAX_FRAMES_PER_TICK> = heapless::Vec::new();
+    let mut command_frames = 0u32;
     let (mut frames, mut nominal_bits, mut worst_bits) = (0.0f32, 0.0f32, 0.0f32);
     let mut add = |count: f32, extended: bool| {
         frames += count;
@@ -243,19 +368,23 @@ fn frame_budget<'n>(
     };
     for node in nodes {
         let u = node.bus_usage();
-        add(u.feedback_hz as f32 * tick_s, u.feedback_extended);
-        add(f32::from(u.command_frames_per_tick), u.command_extended);
+        add(u.feedback_hz as f32 * tick_s, u.listen.any_extended());
+        add(f32::from(u.frames_per_tick), u.sends.any_extended());
+        command_frames = command_frames.saturating_add(u32::from(u.frames_per_tick));
         if let Some(slot) = u.command_slot
-            && !command_ids.contains(&slot.id())
+            && !slot_ids.contains(&slot.id())
         {
-            // More than 16 distinct slot IDs cannot fit a bus anyway; count them regardless.
-            let _ = command_ids.push(slot.id());
+            // More distinct slot IDs than a batch holds cannot fit a bus anyway; count them
+            // regardless.
+            let _ = slot_ids.push(slot.id());
+            command_frames = command_frames.saturating_add(1);
             add(1.0, false);
         }
     }
     let capacity_bits = config.bitrate_bps as f32 * tick_s;
     FrameBudget {
         frames_per_tick: frames,
+        command_frames_per_tick: command_frames,
         nominal_load_percent: 100.0 * nominal_bits / capacity_bits,
         worst_case_load_percent: 100.0 * worst_bits / capacity_bits,
     }
@@ -277,8 +406,9 @@ pub enum Dispatch {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TransmitReport {
-    /// Frames queued.
-    pub sent: u8,
+    /// Frames the transport accepted into its TX buffers. Queued is not yet sent: a frame
+    /// still waits for arbitration (and for an acknowledgement) after this.
+    pub queued: u8,
     /// Frames not queued: TX buffers full.
     pub full: u8,
     /// Frames not queued: controller bus-off.
@@ -345,16 +475,21 @@ impl<'a, const N: usize> Bus<'a, N> {
     }
 
     /// Hands the batch's frames to `tx` in order with `try_send`, counting what was queued and
-    /// what was not. Also records the controller's bus-off state (counting each entry).
+    /// what was not.
+    ///
+    /// Bus-off is tracked here and only here: the controller is taken to be bus-off during
+    /// this tick if `status()` says so *or* any `try_send` reported it, and
+    /// [`BusCounters::bus_off_events`](crate::can::BusCounters) counts each entry once,
+    /// whichever way the transport reports it. A tick with nothing to send and no bus-off
+    /// status leaves the state as it was (there was nothing to learn it from).
     pub fn transmit(&self, batch: &TxBatch, tx: &mut impl CanTransmit) -> TransmitReport {
-        self.stats
-            .record_bus_off_state(tx.status().state == ErrorState::BusOff);
+        let mut bus_off = tx.status().state == ErrorState::BusOff;
         let mut report = TransmitReport::default();
         for frame in batch.frames() {
             match tx.try_send(frame) {
                 Ok(()) => {
                     self.stats.record_tx(timing::unstuffed_bits(frame));
-                    report.sent += 1;
+                    report.queued += 1;
                 }
                 Err(SendError::Full) => {
                     self.stats.record_tx_full();
@@ -362,10 +497,13 @@ impl<'a, const N: usize> Bus<'a, N> {
                 }
                 Err(SendError::BusOff) => {
                     self.stats.record_tx_bus_off();
-                    self.stats.record_bus_off_state(true);
+                    bus_off = true;
                     report.bus_off += 1;
                 }
             }
+        }
+        if bus_off || !batch.frames().is_empty() {
+            self.stats.record_bus_off_state(bus_off);
         }
         report
     }
@@ -388,44 +526,239 @@ impl<'a, const N: usize> Bus<'a, N> {
         Dispatch::Unmatched
     }
 
-    /// Counts a receive-side error reported by the transport.
+    /// Counts a receive-side error reported by the transport. A bus-off report from the
+    /// receive side is not counted here: [`transmit`](Self::transmit) is the one place that
+    /// tracks bus-off (the same condition is visible to it through `status()` or `try_send`),
+    /// so each entry counts once.
     pub fn record_receive_error(&self, error: ReceiveError) {
         match error {
             ReceiveError::Overrun => self.stats.record_overrun(),
             ReceiveError::BusError => self.stats.record_bus_error(),
-            ReceiveError::BusOff => self.stats.record_bus_off_state(true),
+            ReceiveError::BusOff => {}
+        }
+    }
+
+    /// Counts scheduler ticks that were skipped to re-synchronise after a stall.
+    pub fn record_skipped_ticks(&self, ticks: u32) {
+        if ticks > 0 {
+            self.stats.record_skipped_ticks(ticks);
+        }
+    }
+}
+
+/// Where the scheduler's ticks come from. On a board: [`TickerTicks`] (an embassy-time
+/// `Ticker`); in tests, a fake clock.
+#[allow(async_fn_in_trait)] // Used through generics in Embassy tasks; no Send bound is wanted.
+pub trait TickSource {
+    /// Waits for the next tick and returns the time it started.
+    async fn next_tick(&mut self) -> Instant;
+
+    /// Forgets any ticks that are already due: the next tick comes one period after `now`.
+    fn resync(&mut self, now: Instant);
+}
+
+/// An embassy-time `Ticker` as a [`TickSource`]. Reads the global embassy-time clock: this
+/// and [`run_receiver`]'s back-off are the only places in rc10-core that do.
+pub struct TickerTicks {
+    ticker: embassy_time::Ticker,
+}
+
+impl TickerTicks {
+    /// Ticks every `period`.
+    pub fn every(period: Duration) -> Self {
+        Self {
+            ticker: embassy_time::Ticker::every(period),
+        }
+    }
+}
+
+impl TickSource for TickerTicks {
+    async fn next_tick(&mut self) -> Instant {
+        self.ticker.next().await;
+        Instant::now()
+    }
+
+    fn resync(&mut self, _now: Instant) {
+        // `Ticker::reset` schedules the next tick one period from the present.
+        self.ticker.reset();
+    }
+}
+
+/// What [`TickPacer::on_tick`] decided for one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PacedTick {
+    /// Seconds since the previous tick, within `[period / 2, 10 · period]`.
+    pub dt_s: f32,
+    /// Whether the tick source must be re-synchronised (this tick was late by half a period
+    /// or more, so the ticks that fell due meanwhile are skipped rather than run back to back).
+    pub resync: bool,
+    /// Whole periods skipped by that re-synchronisation.
+    pub skipped: u32,
+}
+
+/// The scheduler's timing rules, kept apart from any clock so they can be tested with fake
+/// time.
+///
+/// embassy-time's `Ticker` (like a FreeRTOS `vTaskDelayUntil` loop) fires ticks it missed
+/// during a stall back to back, a few microseconds apart. Control loops would then see a burst
+/// of tiny `dt`s (D terms spike) and the bus a burst of commands. The pacer tracks when the
+/// next tick is due; a tick that starts half a period or more after that is *late*: the source
+/// is re-synchronised (the missed ticks are skipped and counted) and the next tick comes one
+/// period later. Every `dt` is therefore at least half a period, and at most ten periods
+/// after a long stall ([`DeltaTime`] bounds it).
+///
+/// ```
+/// use rc10_core::bus::TickPacer;
+/// use rc10_core::time::{Duration, Instant};
+/// let mut pacer = TickPacer::new(Duration::from_millis(1));
+/// pacer.on_tick(Instant::from_millis(0));
+/// let late = pacer.on_tick(Instant::from_millis(50)); // a 49 ms stall
+/// assert!(late.resync);
+/// assert_eq!(late.skipped, 49);
+/// assert_eq!(late.dt_s, 0.01); // bounded to ten periods
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TickPacer {
+    period: Duration,
+    next_due: Option<Instant>,
+    dt: DeltaTime,
+}
+
+impl TickPacer {
+    /// A pacer for ticks every `period` (zero is raised to 1 µs).
+    pub const fn new(period: Duration) -> Self {
+        let period = if period.as_ticks() == 0 {
+            Duration::from_micros(1)
+        } else {
+            period
+        };
+        Self {
+            period,
+            next_due: None,
+            dt: DeltaTime::new(
+                period,
+                Duration::from_ticks(period.as_ticks().saturating_mul(10)),
+            ),
+        }
+    }
+
+    /// Called at the start of each tick with the time `now`.
+    pub fn on_tick(&mut self, now: Instant) -> PacedTick {
+        let (resync, skipped) = match self.next_due {
+            // The first tick: align the source with the pacer.
+            None => (true, 0),
+            Some(due) => {
+                let late = now.saturating_duration_since(due);
+                if late.as_ticks() * 2 >= self.period.as_ticks() {
+                    let missed = late.as_ticks() / self.period.as_ticks();
+                    (true, u32::try_from(missed).unwrap_or(u32::MAX))
+                } else {
+                    (false, 0)
+                }
+            }
+        };
+        self.next_due = Some(match (resync, self.next_due) {
+            (false, Some(due)) => due + self.period,
+            _ => now + self.period,
+        });
+        PacedTick {
+            dt_s: self.dt.update(now),
+            resync,
+            skipped,
         }
     }
 }
 
 /// The scheduler task's loop: every `period` from an embassy-time `Ticker`, [`Bus::tick`] then
-/// [`Bus::transmit`]. `dt` is measured with 64-bit microsecond time, bounded to
-/// `[period, 10·period]` on the first tick and after a stall.
+/// [`Bus::transmit`]. Timing follows [`TickPacer`]: `dt` stays within
+/// `[period / 2, 10 · period]`, and after a stall the missed ticks are skipped (counted in
+/// `ticks_skipped`), not run back to back.
 pub async fn run_scheduler<T: CanTransmit, const N: usize>(
     bus: &Bus<'_, N>,
-    mut tx: T,
+    tx: T,
     period: Duration,
 ) -> ! {
-    let mut ticker = embassy_time::Ticker::every(period);
-    let mut dt = DeltaTime::new(period, period * 10);
+    run_scheduler_on(bus, tx, TickerTicks::every(period), period).await
+}
+
+/// [`run_scheduler`] with the ticks taken from `ticks` (a fake clock in tests, or your own
+/// timer).
+pub async fn run_scheduler_on<T: CanTransmit, S: TickSource, const N: usize>(
+    bus: &Bus<'_, N>,
+    mut tx: T,
+    mut ticks: S,
+    period: Duration,
+) -> ! {
+    let mut pacer = TickPacer::new(period);
     let mut batch = TxBatch::new();
     loop {
-        ticker.next().await;
-        let now = Instant::now();
-        let dt_s = dt.update(now);
-        bus.tick(now, dt_s, &mut batch);
+        let now = ticks.next_tick().await;
+        let paced = pacer.on_tick(now);
+        if paced.resync {
+            ticks.resync(now);
+            bus.record_skipped_ticks(paced.skipped);
+        }
+        bus.tick(now, paced.dt_s, &mut batch);
         bus.transmit(&batch, &mut tx);
     }
 }
 
-/// The receiver task's loop: awaits frames and dispatches each with its reception timestamp.
+/// How long [`run_receiver`] waits after consecutive receive errors: nothing after the first
+/// (an overrun is a one-off event and the FIFO should be drained at once), then 100 µs,
+/// doubling up to 10 ms while errors continue; back to nothing after a frame arrives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReceiveBackoff {
+    consecutive_errors: u32,
+}
+
+impl ReceiveBackoff {
+    /// First wait after a repeated error.
+    pub const FIRST: Duration = Duration::from_micros(100);
+    /// Longest wait.
+    pub const MAX: Duration = Duration::from_millis(10);
+
+    /// No errors yet.
+    pub const fn new() -> Self {
+        Self {
+            consecutive_errors: 0,
+        }
+    }
+
+    /// A frame arrived: errors are no longer consecutive.
+    pub fn on_frame(&mut self) {
+        self.consecutive_errors = 0;
+    }
+
+    /// An error was reported: how long to wait before receiving again, if at all.
+    pub fn on_error(&mut self) -> Option<Duration> {
+        self.consecutive_errors = self.consecutive_errors.saturating_add(1);
+        let doublings = self.consecutive_errors.checked_sub(2)?;
+        let first = Self::FIRST.as_ticks();
+        let wait = first
+            .checked_shl(doublings.min(16))
+            .unwrap_or(u64::MAX)
+            .min(Self::MAX.as_ticks());
+        Some(Duration::from_ticks(wait))
+    }
+}
+
+/// The receiver task's loop: awaits frames and dispatches each with its timestamp. A
+/// transport that keeps reporting errors does not make it spin: see [`ReceiveBackoff`].
 pub async fn run_receiver<R: CanReceive, const N: usize>(bus: &Bus<'_, N>, mut rx: R) -> ! {
+    let mut backoff = ReceiveBackoff::new();
     loop {
         match rx.receive().await {
             Ok(received) => {
+                backoff.on_frame();
                 bus.dispatch(&received.frame, received.timestamp);
             }
-            Err(e) => bus.record_receive_error(e),
+            Err(e) => {
+                bus.record_receive_error(e);
+                if let Some(wait) = backoff.on_error() {
+                    embassy_time::Timer::after(wait).await;
+                }
+            }
         }
     }
 }

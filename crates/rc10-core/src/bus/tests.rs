@@ -5,7 +5,12 @@ use crate::can::loopback::TxQueue;
 use crate::can::{BusStatus, IdFilter};
 use crate::motor::Motor;
 use crate::motor::dji::DjiMotor;
-use crate::node::{BusUsage, CommandSlot, FrameError};
+use crate::motor::dm::{DmConfig, DmMotor};
+use crate::node::{BusUsage, CommandSlot, FrameError, IdSet};
+use core::cell::Cell;
+use core::future::Future;
+use core::pin::pin;
+use core::task::{Context, Waker};
 use std::sync::Mutex as StdMutex;
 
 const T0: Instant = Instant::from_millis(10);
@@ -47,7 +52,7 @@ impl CanNode for Probe {
     }
     fn pack_command(&self, out: &mut TxBatch) {
         self.log.lock().unwrap().push(format!("pack {}", self.name));
-        for i in 0..self.usage.command_frames_per_tick {
+        for i in 0..self.usage.frames_per_tick {
             let _ = out.push(CanFrame::standard(0x300 + u16::from(i), &[i]).unwrap());
         }
     }
@@ -59,8 +64,28 @@ fn leak_log() -> &'static StdMutex<Vec<String>> {
 
 const NO_BUDGET: BusConfig = BusConfig {
     max_load_percent: f32::INFINITY,
+    tx_depth: 16,
     ..BusConfig::DEFAULT
 };
+
+/// The frames a Probe with `frames` whole frames per tick sends on: 0x300, 0x301, …
+fn probe_sends(frames: u8) -> BusUsage {
+    BusUsage::NONE.sending(
+        IdFilter {
+            extended: false,
+            id: 0x300,
+            mask: 0x7F0,
+        },
+        frames,
+    )
+}
+
+fn std_id(id: u32) -> RawId {
+    RawId {
+        id,
+        extended: false,
+    }
+}
 
 #[test]
 fn m3508_id5_and_gm6020_id1_feedback_conflict_is_reported() {
@@ -70,7 +95,10 @@ fn m3508_id5_and_gm6020_id1_feedback_conflict_is_reported() {
     b.register(&wheel).unwrap();
     assert_eq!(
         b.register(&yaw),
-        Err(RegisterError::FeedbackConflict { existing: 0 })
+        Err(RegisterError::FeedbackConflict {
+            existing: 0,
+            id: std_id(0x205)
+        })
     );
     assert_eq!(b.build().nodes().len(), 1);
 }
@@ -86,7 +114,10 @@ fn same_slot_is_a_conflict() {
     b.register(&a).unwrap();
     assert_eq!(
         b.register(&c),
-        Err(RegisterError::SlotConflict { existing: 0 })
+        Err(RegisterError::SlotConflict {
+            existing: 0,
+            slot: CommandSlot::new(0x200, 1).unwrap()
+        })
     );
 }
 
@@ -179,7 +210,7 @@ fn four_m3508_merge_into_one_0x200_frame_and_idle_slots_are_zero() {
 fn transmit_counts_frames_that_do_not_fit_three_tx_buffers() {
     let log = leak_log();
     let mut p = Probe::new("p", log);
-    p.usage.command_frames_per_tick = 5;
+    p.usage = probe_sends(5);
     let mut builder = BusBuilder::<1>::with_config(NO_BUDGET);
     builder.register(&p).unwrap();
     let bus = builder.build();
@@ -190,7 +221,7 @@ fn transmit_counts_frames_that_do_not_fit_three_tx_buffers() {
     assert_eq!(
         report,
         TransmitReport {
-            sent: 3,
+            queued: 3,
             full: 2,
             bus_off: 0
         }
@@ -298,13 +329,364 @@ fn rates_latch_frames_per_second_and_load() {
 fn masked_listener_conflicts_with_exact_one() {
     let log = leak_log();
     let mut a = Probe::new("a", log);
-    a.usage.listen = Some(IdFilter::extended_masked(0x07, 0xFF));
+    a.usage.listen = IdSet::one(IdFilter::extended_masked(0x07, 0xFF));
     let mut c = Probe::new("c", log);
-    c.usage.listen = Some(IdFilter::extended(0x0907));
+    c.usage.listen = IdSet::one(IdFilter::extended(0x0907));
     let mut b = BusBuilder::<2>::new();
     b.register(&a).unwrap();
     assert_eq!(
         b.register(&c),
-        Err(RegisterError::FeedbackConflict { existing: 0 })
+        Err(RegisterError::FeedbackConflict {
+            existing: 0,
+            id: RawId {
+                id: 0x0907,
+                extended: true
+            }
+        })
     );
+}
+
+#[test]
+fn two_damiao_motors_on_one_can_id_are_rejected() {
+    let a = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+    let b = DmMotor::new(0x01, DmConfig::new(0x12)).unwrap();
+    let mut builder = BusBuilder::<4>::new();
+    builder.register(&a).unwrap();
+    assert_eq!(
+        builder.register(&b),
+        Err(RegisterError::SendConflict {
+            existing: 0,
+            id: std_id(0x01)
+        })
+    );
+}
+
+#[test]
+fn damiao_on_a_dji_command_id_is_rejected_in_either_order() {
+    // A DM motor on CAN ID 0x200 next to an M3508 id 1: the MIT frame would be merged with
+    // the C620 slots (C620s 2–4 would read MIT fields as currents) or sent as a second 0x200.
+    let dm = DmMotor::new(0x200, DmConfig::new(0x11)).unwrap();
+    let wheel = DjiMotor::m3508(1).unwrap();
+    let mut b = BusBuilder::<4>::new();
+    b.register(&wheel).unwrap();
+    assert_eq!(
+        b.register(&dm),
+        Err(RegisterError::SendConflict {
+            existing: 0,
+            id: std_id(0x200)
+        })
+    );
+    let mut b = BusBuilder::<4>::new();
+    b.register(&dm).unwrap();
+    assert_eq!(
+        b.register(&wheel),
+        Err(RegisterError::SendConflict {
+            existing: 0,
+            id: std_id(0x200)
+        })
+    );
+}
+
+#[test]
+fn damiao_commanding_on_a_c620_feedback_id_is_rejected_in_either_order() {
+    let dm = DmMotor::new(0x201, DmConfig::new(0x11)).unwrap();
+    let wheel = DjiMotor::m3508(1).unwrap(); // answers on 0x201
+    let mut b = BusBuilder::<4>::new();
+    b.register(&wheel).unwrap();
+    assert_eq!(
+        b.register(&dm),
+        Err(RegisterError::CommandOnFeedbackId {
+            sender: 1,
+            listener: 0,
+            id: std_id(0x201)
+        })
+    );
+    let mut b = BusBuilder::<4>::new();
+    b.register(&dm).unwrap();
+    assert_eq!(
+        b.register(&wheel),
+        Err(RegisterError::CommandOnFeedbackId {
+            sender: 0,
+            listener: 1,
+            id: std_id(0x201)
+        })
+    );
+    // A Damiao master ID on a DJI command ID is the same clash seen from the other side.
+    let listens_on_0x1ff = DmMotor::new(0x05, DmConfig::new(0x1FF)).unwrap();
+    let wheel_5 = DjiMotor::m3508(5).unwrap(); // commanded on 0x1FF
+    let mut b = BusBuilder::<4>::new();
+    b.register(&wheel_5).unwrap();
+    assert_eq!(
+        b.register(&listens_on_0x1ff),
+        Err(RegisterError::CommandOnFeedbackId {
+            sender: 0,
+            listener: 1,
+            id: std_id(0x1FF)
+        })
+    );
+}
+
+#[test]
+fn a_node_may_not_send_where_it_listens() {
+    let log = leak_log();
+    let mut p = Probe::new("p", log);
+    p.usage = probe_sends(1).listening(IdFilter::standard(0x300), 1000);
+    let mut b = BusBuilder::<2>::new();
+    assert_eq!(
+        b.register(&p),
+        Err(RegisterError::CommandOnFeedbackId {
+            sender: 0,
+            listener: 0,
+            id: std_id(0x300)
+        })
+    );
+}
+
+#[test]
+fn four_damiao_motors_do_not_fit_three_tx_buffers_but_fit_four() {
+    let dms: Vec<DmMotor> = (1..=4u16)
+        .map(|i| DmMotor::new(i, DmConfig::new(0x10 + i)).unwrap())
+        .collect();
+    let mut b = BusBuilder::<8>::new();
+    for m in &dms[..3] {
+        b.register(m).unwrap();
+    }
+    assert_eq!(
+        b.register(&dms[3]),
+        Err(RegisterError::TxDepth {
+            frames_per_tick: 4,
+            tx_depth: 3
+        })
+    );
+    // A transport that queues four frames serves all four motors every tick.
+    let mut b = BusBuilder::<8>::with_config(BusConfig::DEFAULT.with_tx_depth(4));
+    for m in &dms {
+        b.register(m).unwrap();
+        m.set_target_rpm(30.0).unwrap();
+    }
+    let bus = b.build();
+    let mut tx = TxQueue::<4>::new();
+    let mut batch = TxBatch::new();
+    for tick in 0..10u64 {
+        let now = T0 + Duration::from_millis(tick);
+        bus.tick(now, 0.001, &mut batch);
+        let report = bus.transmit(&batch, &mut tx);
+        assert_eq!((report.queued, report.full), (4, 0));
+        let ids: Vec<u32> = core::iter::from_fn(|| tx.pop())
+            .map(|f| f.raw_id())
+            .collect();
+        assert_eq!(ids, [1, 2, 3, 4]);
+    }
+}
+
+#[test]
+fn dji_slot_frames_count_against_the_tx_depth() {
+    // 0x200 (M3508 1), 0x1FF (M3508 5), 0x2FE (GM6020 current 6), 0x2FF (GM6020 voltage 7):
+    // four shared frames per tick. (A GM6020 id 1 would answer on 0x205, like M3508 5.)
+    let a = DjiMotor::m3508(1).unwrap();
+    let c = DjiMotor::m3508(5).unwrap();
+    let d = DjiMotor::gm6020_current(1).unwrap();
+    let d6 = DjiMotor::gm6020_current(6).unwrap(); // 0x20A, slot 0x2FE
+    let e = DjiMotor::gm6020_voltage(7).unwrap(); // 0x20B, slot 0x2FF
+    let mut b = BusBuilder::<8>::with_config(BusConfig {
+        max_load_percent: f32::INFINITY,
+        ..BusConfig::DEFAULT
+    });
+    b.register(&a).unwrap();
+    b.register(&c).unwrap();
+    assert!(matches!(
+        b.register(&d),
+        Err(RegisterError::FeedbackConflict { .. })
+    ));
+    b.register(&d6).unwrap();
+    assert_eq!(
+        b.register(&e),
+        Err(RegisterError::TxDepth {
+            frames_per_tick: 4,
+            tx_depth: 3
+        })
+    );
+}
+
+/// A transport that cannot report its state (`status()` is the default, error-active) but
+/// refuses frames with `BusOff` while `off` is set.
+struct SilentBusOff<'a> {
+    off: &'a Cell<bool>,
+}
+
+impl CanTransmit for SilentBusOff<'_> {
+    fn try_send(&mut self, _frame: &CanFrame) -> Result<(), SendError> {
+        if self.off.get() {
+            Err(SendError::BusOff)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+#[test]
+fn bus_off_reported_only_through_try_send_counts_once_per_entry() {
+    let m = DjiMotor::m3508(1).unwrap();
+    let mut builder = BusBuilder::<1>::new();
+    builder.register(&m).unwrap();
+    let bus = builder.build();
+    let off = Cell::new(true);
+    let mut tx = SilentBusOff { off: &off };
+    let mut batch = TxBatch::new();
+    let mut run = |ticks: u32, tx: &mut SilentBusOff<'_>| {
+        for _ in 0..ticks {
+            bus.tick(T0, 0.001, &mut batch);
+            bus.transmit(&batch, tx);
+        }
+    };
+    run(20, &mut tx);
+    assert_eq!(bus.stats().snapshot().bus_off_events, 1);
+    assert_eq!(bus.stats().snapshot().tx_bus_off, 20);
+    off.set(false);
+    run(5, &mut tx);
+    assert!(!bus.stats().is_bus_off());
+    off.set(true);
+    run(5, &mut tx);
+    assert_eq!(bus.stats().snapshot().bus_off_events, 2);
+    // A receive-side bus-off report does not count a second time.
+    bus.record_receive_error(ReceiveError::BusOff);
+    run(1, &mut tx);
+    assert_eq!(bus.stats().snapshot().bus_off_events, 2);
+}
+
+#[test]
+fn pacer_skips_ticks_missed_in_a_stall_and_bounds_dt() {
+    let period = Duration::from_millis(1);
+    let mut pacer = TickPacer::new(period);
+    let first = pacer.on_tick(Instant::from_micros(1_000));
+    assert!(first.resync);
+    assert_eq!(first.dt_s, 0.001);
+    // On time, then 300 µs late (jitter: no resync), then on time again.
+    assert!(!pacer.on_tick(Instant::from_micros(2_000)).resync);
+    let late = pacer.on_tick(Instant::from_micros(3_300));
+    assert!(!late.resync);
+    assert!((late.dt_s - 0.0013).abs() < 1e-7);
+    let next = pacer.on_tick(Instant::from_micros(4_000));
+    assert!((next.dt_s - 0.0007).abs() < 1e-7);
+    // A 40 ms stall: the first tick after it re-synchronises and reports the skipped periods.
+    let after = pacer.on_tick(Instant::from_micros(45_000));
+    assert_eq!((after.resync, after.skipped), (true, 40));
+    assert_eq!(after.dt_s, 0.01); // bounded
+    let resumed = pacer.on_tick(Instant::from_micros(46_000));
+    assert!(!resumed.resync);
+    assert_eq!(resumed.dt_s, 0.001);
+}
+
+/// An embassy-time `Ticker` over a fake clock: fires at `due`, then `due += period`; a tick
+/// that is already overdue fires at once (so ticks missed in a stall come back to back, as
+/// they do with the real `Ticker`). After `limit` ticks it never fires again.
+struct FakeTicker<'a> {
+    now_us: &'a Cell<u64>,
+    due_us: u64,
+    period_us: u64,
+    ticks: u32,
+    limit: u32,
+    stall_at: u32,
+    stall_us: u64,
+}
+
+impl TickSource for FakeTicker<'_> {
+    async fn next_tick(&mut self) -> Instant {
+        if self.ticks == self.limit {
+            core::future::pending::<()>().await;
+        }
+        self.ticks += 1;
+        let mut now = self.now_us.get() + 5; // the previous tick's own run time
+        if self.ticks == self.stall_at {
+            now += self.stall_us; // a higher-priority task held the CPU
+        }
+        now = now.max(self.due_us);
+        self.due_us += self.period_us;
+        self.now_us.set(now);
+        Instant::from_micros(now)
+    }
+
+    fn resync(&mut self, now: Instant) {
+        self.due_us = now.as_micros() + self.period_us;
+    }
+}
+
+/// Records the time and dt of every update.
+struct DtProbe {
+    calls: StdMutex<Vec<(u64, f32)>>,
+}
+
+impl CanNode for DtProbe {
+    fn bus_usage(&self) -> BusUsage {
+        probe_sends(1)
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        Ok(())
+    }
+    fn update(&self, now: Instant, dt_s: f32) {
+        self.calls.lock().unwrap().push((now.as_micros(), dt_s));
+    }
+    fn pack_command(&self, out: &mut TxBatch) {
+        let _ = out.push(CanFrame::standard(0x300, &[]).unwrap());
+    }
+}
+
+struct CountingTx<'a>(&'a Cell<u32>);
+
+impl CanTransmit for CountingTx<'_> {
+    fn try_send(&mut self, _frame: &CanFrame) -> Result<(), SendError> {
+        self.0.set(self.0.get() + 1);
+        Ok(())
+    }
+}
+
+#[test]
+fn scheduler_after_a_stall_skips_missed_ticks_instead_of_bursting() {
+    let probe = DtProbe {
+        calls: StdMutex::new(Vec::new()),
+    };
+    let mut builder = BusBuilder::<1>::new();
+    builder.register(&probe).unwrap();
+    let bus = builder.build();
+    let clock = Cell::new(0u64);
+    let ticker = FakeTicker {
+        now_us: &clock,
+        due_us: 1_000,
+        period_us: 1_000,
+        ticks: 0,
+        limit: 200,
+        stall_at: 100,
+        stall_us: 50_000,
+    };
+    let sent = Cell::new(0u32);
+    let period = Duration::from_millis(1);
+    let mut fut = pin!(run_scheduler_on(&bus, CountingTx(&sent), ticker, period));
+    let mut cx = Context::from_waker(Waker::noop());
+    assert!(fut.as_mut().poll(&mut cx).is_pending()); // ran the 200 ticks, then waits
+    let calls = probe.calls.lock().unwrap().clone();
+    assert_eq!(calls.len(), 200);
+    assert_eq!(sent.get(), 200); // one frame per tick, no extra
+    for (t, dt) in &calls {
+        assert!((0.0005..=0.010).contains(dt), "dt {dt} s at {t} µs");
+    }
+    // Ticks come at least ~a period apart everywhere, including right after the stall.
+    for pair in calls.windows(2) {
+        assert!(pair[1].0 - pair[0].0 >= 900, "{:?}", pair);
+    }
+    let skipped = bus.stats().snapshot().ticks_skipped;
+    assert!((49..=50).contains(&skipped), "skipped {skipped}");
+}
+
+#[test]
+fn receive_backoff_waits_only_for_repeated_errors_and_resets_on_a_frame() {
+    let mut b = ReceiveBackoff::new();
+    assert_eq!(b.on_error(), None);
+    assert_eq!(b.on_error(), Some(Duration::from_micros(100)));
+    assert_eq!(b.on_error(), Some(Duration::from_micros(200)));
+    for _ in 0..20 {
+        b.on_error();
+    }
+    assert_eq!(b.on_error(), Some(ReceiveBackoff::MAX));
+    b.on_frame();
+    assert_eq!(b.on_error(), None);
 }

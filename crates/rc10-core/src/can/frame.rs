@@ -2,6 +2,8 @@
 
 pub use embedded_can::{ExtendedId, Id, StandardId};
 
+use core::fmt;
+
 /// A classic CAN 2.0 frame: standard (11-bit) or extended (29-bit) ID, 0–8 data bytes or a
 /// remote request.
 ///
@@ -235,6 +237,41 @@ impl IdFilter {
     /// Whether some ID passes both filters.
     pub const fn overlaps(&self, other: &Self) -> bool {
         self.extended == other.extended && (self.id ^ other.id) & self.mask & other.mask == 0
+    }
+}
+
+/// A CAN ID as a number and its kind, for error reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RawId {
+    /// The 11- or 29-bit ID.
+    pub id: u32,
+    /// Whether it is an extended (29-bit) ID.
+    pub extended: bool,
+}
+
+impl fmt::Display for RawId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.extended {
+            write!(f, "extended 0x{:08X}", self.id)
+        } else {
+            write!(f, "0x{:03X}", self.id)
+        }
+    }
+}
+
+impl IdFilter {
+    /// An ID that passes both filters, if there is one (the bits either filter fixes, the
+    /// rest zero).
+    pub const fn common_id(&self, other: &Self) -> Option<RawId> {
+        if !self.overlaps(other) {
+            return None;
+        }
+        let width = if self.extended { 0x1FFF_FFFF } else { 0x7FF };
+        Some(RawId {
+            id: ((self.id & self.mask) | (other.id & other.mask)) & width,
+            extended: self.extended,
+        })
     }
 }
 

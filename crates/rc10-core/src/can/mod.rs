@@ -7,7 +7,7 @@ pub mod stats;
 pub mod timing;
 mod transport;
 
-pub use frame::{CanFrame, ExtendedId, Id, IdFilter, StandardId};
+pub use frame::{CanFrame, ExtendedId, Id, IdFilter, RawId, StandardId};
 pub use stats::{BusCounters, BusRates, BusStats};
 pub use transport::{
     BusStatus, CanReceive, CanTransmit, ErrorState, ReceiveError, Received, SendError,

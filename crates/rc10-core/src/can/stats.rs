@@ -26,6 +26,7 @@ pub struct BusStats {
     tx_batch_overflow: AtomicU32,
     bus_off_events: AtomicU32,
     ticks: AtomicU32,
+    ticks_skipped: AtomicU32,
     bus_off_now: AtomicBool,
 }
 
@@ -55,6 +56,7 @@ impl BusStats {
             tx_batch_overflow: AtomicU32::new(0),
             bus_off_events: AtomicU32::new(0),
             ticks: AtomicU32::new(0),
+            ticks_skipped: AtomicU32::new(0),
             bus_off_now: AtomicBool::new(false),
         }
     }
@@ -91,6 +93,9 @@ impl BusStats {
     pub(crate) fn record_tick(&self) {
         bump!(self.ticks);
     }
+    pub(crate) fn record_skipped_ticks(&self, n: u32) {
+        bump!(self.ticks_skipped, n);
+    }
 
     /// Records the controller's bus-off flag; counts an event on each entry into bus-off.
     pub(crate) fn record_bus_off_state(&self, bus_off: bool) {
@@ -122,6 +127,7 @@ impl BusStats {
             tx_batch_overflow: l(&self.tx_batch_overflow),
             bus_off_events: l(&self.bus_off_events),
             ticks: l(&self.ticks),
+            ticks_skipped: l(&self.ticks_skipped),
         }
     }
 }
@@ -143,7 +149,8 @@ pub struct BusCounters {
     pub rx_overruns: u32,
     /// Bus protocol errors reported by the transport.
     pub bus_errors: u32,
-    /// Frames queued for transmission.
+    /// Frames queued into the transport's TX buffers. Queued is not yet on the wire: a frame
+    /// that is never acknowledged (no node on the bus) stays queued and is retransmitted.
     pub tx_frames: u32,
     /// Bits of queued frames without stuff bits (see `rx_bits`).
     pub tx_bits: u32,
@@ -157,6 +164,8 @@ pub struct BusCounters {
     pub bus_off_events: u32,
     /// Scheduler ticks run.
     pub ticks: u32,
+    /// Scheduler ticks skipped to re-synchronise after a stall (not run late, back to back).
+    pub ticks_skipped: u32,
 }
 
 impl BusCounters {
@@ -185,6 +194,7 @@ impl BusCounters {
                 .wrapping_sub(earlier.tx_batch_overflow),
             bus_off_events: self.bus_off_events.wrapping_sub(earlier.bus_off_events),
             ticks: self.ticks.wrapping_sub(earlier.ticks),
+            ticks_skipped: self.ticks_skipped.wrapping_sub(earlier.ticks_skipped),
         }
     }
 

@@ -6,10 +6,14 @@
 //!   10th), turns degrees of error into a speed target for the speed loop. Angle mode uses a
 //!   circular error (shortest way round); total-angle mode a linear one.
 //! - Mode switches are bumpless: a loop that takes over starts from the command the motor
-//!   already has, so the output does not jump; a loop that is left is reset.
+//!   really received last tick (after the limit in force: ESC range, thermal derating, a
+//!   user's current limit), so the output does not jump; a loop that is left is reset.
+//! - The limit in force is an argument of every [`Cascade::step`]: the output never exceeds
+//!   it and the speed loop's anti-windup works against it.
+//! - A feed-forward (command units) is added by the speed loop in speed and angle modes.
 
 use super::ControlMode;
-use crate::math::wrap_deg_360;
+use crate::math::{saturate, wrap_deg_360};
 use crate::pid::{ErrorMode, Pid, PidConfig, PidConfigError, PidTerms};
 
 /// Gains and structure of a [`Cascade`].
@@ -47,6 +51,7 @@ pub struct Cascade {
     ticks_since_angle: u8,
     angle_dt_s: f32,
     speed_target_rpm: f32,
+    feed_forward: f32,
     output: f32,
 }
 
@@ -70,6 +75,7 @@ impl Cascade {
             ticks_since_angle: 0,
             angle_dt_s: 0.0,
             speed_target_rpm: 0.0,
+            feed_forward: 0.0,
             output: 0.0,
         })
     }
@@ -104,9 +110,49 @@ impl Cascade {
         self.angle.last_terms()
     }
 
+    /// The command the last [`step`](Self::step) returned (what was applied).
+    pub const fn output(&self) -> f32 {
+        self.output
+    }
+
+    /// The feed-forward in command units (amps or volts).
+    pub const fn feed_forward(&self) -> f32 {
+        self.feed_forward
+    }
+
+    /// Sets the feed-forward in command units, added by the speed loop in speed and angle
+    /// modes (not in open-loop modes). A non-finite value is ignored.
+    pub fn set_feed_forward(&mut self, command: f32) {
+        if command.is_finite() {
+            self.feed_forward = command;
+        }
+    }
+
+    /// Replaces the speed loop's configuration while running (live tuning), keeping its
+    /// integral; its output limit is the command limit. Unchanged on error.
+    pub fn set_speed_config(&mut self, speed: PidConfig) -> Result<(), PidConfigError> {
+        self.speed.set_config(speed)?;
+        self.config.speed = speed;
+        Ok(())
+    }
+
+    /// Replaces the angle loop's configuration while running (its error mode stays the one
+    /// the present mode needs). Unchanged on error.
+    pub fn set_angle_config(&mut self, angle: PidConfig) -> Result<(), PidConfigError> {
+        let mode = self.angle.config().error_mode;
+        self.angle.set_config(angle.with_error_mode(mode))?;
+        self.config.angle = angle;
+        Ok(())
+    }
+
+    /// Sets the angle loop's divider (0 is treated as 1).
+    pub fn set_angle_divider(&mut self, divider: u8) {
+        self.config.angle_divider = divider;
+    }
+
     /// Sets mode and target. A change of mode resets the loops that start working, preloading
-    /// the speed loop with the present command (bumpless). The target must be finite (callers
-    /// check; a non-finite target is ignored here).
+    /// the speed loop with the command applied last tick (bumpless). The target must be finite
+    /// (callers check; a non-finite target is ignored here).
     pub fn set_target(&mut self, mode: ControlMode, target: f32) {
         if !target.is_finite() {
             return;
@@ -125,7 +171,13 @@ impl Cascade {
             };
             if uses_speed(mode) && !uses_speed(self.mode) {
                 self.speed.reset();
-                self.speed.set_integral(self.output);
+                // From an open-loop mode, start at what the motor really got (already within
+                // the limit that was in force): at zero error the output is integral +
+                // feed-forward. From Disabled nothing was applied: start from the
+                // feed-forward alone (e.g. holding an arm against gravity at once).
+                if self.mode != ControlMode::Disabled {
+                    self.speed.set_integral(self.output - self.feed_forward);
+                }
             }
             if matches!(mode, ControlMode::Angle | ControlMode::TotalAngle) {
                 let error_mode = if mode == ControlMode::Angle {
@@ -161,16 +213,22 @@ impl Cascade {
         self.angle_dt_s = 0.0;
     }
 
-    /// One tick: returns the command (amps or volts), limited by the speed loop's output limit
-    /// in closed-loop modes. In current / voltage mode the target is returned as is (the
-    /// driver clamps it to the ESC's range).
-    pub fn step(&mut self, m: &Measured, dt_s: f32) -> f32 {
+    /// One tick: returns the command (amps or volts) to apply, within `±limit` (the limit in
+    /// force: the ESC's range after derating and any user limit; NaN or negative counts as
+    /// zero) and, in closed-loop modes, within the speed loop's own output limit. In current /
+    /// voltage / torque mode the target is passed through, clamped.
+    pub fn step(&mut self, m: &Measured, dt_s: f32, limit: f32) -> f32 {
+        let limit = if limit > 0.0 { limit } else { 0.0 };
         self.output = match self.mode {
             ControlMode::Disabled => 0.0,
-            ControlMode::Current | ControlMode::Voltage => self.target,
+            ControlMode::Current | ControlMode::Voltage | ControlMode::Torque => {
+                saturate(self.target, limit)
+            }
             ControlMode::Speed => {
                 self.speed_target_rpm = self.target;
-                self.speed.update(self.target, m.speed_rpm, dt_s).output
+                self.speed
+                    .update_within(self.target, m.speed_rpm, self.feed_forward, dt_s, limit)
+                    .output
             }
             ControlMode::Angle | ControlMode::TotalAngle => {
                 self.angle_dt_s += dt_s;
@@ -190,7 +248,13 @@ impl Cascade {
                     self.angle_dt_s = 0.0;
                 }
                 self.speed
-                    .update(self.speed_target_rpm, m.speed_rpm, dt_s)
+                    .update_within(
+                        self.speed_target_rpm,
+                        m.speed_rpm,
+                        self.feed_forward,
+                        dt_s,
+                        limit,
+                    )
                     .output
             }
         };
@@ -216,7 +280,7 @@ mod tests {
         let mut c = cascade();
         c.set_target(ControlMode::Speed, 100.0);
         // p = 0.1·100 = 10; i = 10·100·0.001 = 1 (first trapezoid step uses e for both ends).
-        let out = c.step(&Measured::default(), 0.001);
+        let out = c.step(&Measured::default(), 0.001, 20.0);
         assert!((out - 11.0).abs() < 1e-4, "{out}");
     }
 
@@ -224,14 +288,84 @@ mod tests {
     fn switch_from_current_to_speed_is_bumpless() {
         let mut c = cascade();
         c.set_target(ControlMode::Current, 5.0);
-        assert_eq!(c.step(&Measured::default(), 0.001), 5.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 5.0);
         // Speed target equal to the measured speed: the output must stay at 5 A.
         c.set_target(ControlMode::Speed, 50.0);
         let m = Measured {
             speed_rpm: 50.0,
             ..Default::default()
         };
-        assert!((c.step(&m, 0.001) - 5.0).abs() < 1e-6);
+        assert!((c.step(&m, 0.001, 20.0) - 5.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn switch_to_speed_preloads_what_was_applied_not_the_unclamped_target() {
+        // 100 A asked in current mode is clamped to the ESC's 20 A. Switching to a speed target
+        // equal to the present speed starts the loop from the 20 A really applied, so as soon
+        // as the motor runs faster than the target the current falls. (Preloaded with the
+        // unclamped 100 A, the loop would hold 20 A until 80 A of integral had unwound: a
+        // runaway.)
+        let mut c = cascade();
+        c.set_target(ControlMode::Current, 100.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 20.0);
+        c.set_target(ControlMode::Speed, 0.0);
+        assert_eq!(c.speed.integral(), 20.0);
+        let too_fast = Measured {
+            speed_rpm: 50.0,
+            ..Default::default()
+        };
+        // p = 0.1 A/rpm · -50 rpm = -5 A on top of the 20 A held.
+        let out = c.step(&too_fast, 0.001, 20.0);
+        assert!(out < 15.5, "{out}");
+        // Derated to 5 A: the command is within 5 A and so is the integral.
+        let out = c.step(&Measured::default(), 0.001, 5.0);
+        assert!(out <= 5.0);
+        assert!(c.speed.integral() <= 5.0);
+    }
+
+    #[test]
+    fn switch_after_derated_current_preloads_the_derated_value() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Current, 15.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 6.0), 6.0); // derated
+        c.set_target(ControlMode::Speed, 0.0);
+        let out = c.step(&Measured::default(), 0.001, 20.0);
+        assert!((out - 6.0).abs() < 1e-6, "{out}");
+    }
+
+    #[test]
+    fn feed_forward_adds_in_closed_loop_modes_only() {
+        let mut c = cascade();
+        c.set_feed_forward(2.0);
+        c.set_target(ControlMode::Speed, 0.0);
+        assert!((c.step(&Measured::default(), 0.001, 20.0) - 2.0).abs() < 1e-6);
+        c.set_target(ControlMode::Angle, 0.0);
+        assert!((c.step(&Measured::default(), 0.001, 20.0) - 2.0).abs() < 1e-6);
+        c.set_target(ControlMode::Current, 1.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 1.0);
+        // Bumpless into speed mode with a feed-forward: still 1 A at zero error.
+        c.set_target(ControlMode::Speed, 0.0);
+        assert!((c.step(&Measured::default(), 0.001, 20.0) - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn live_gain_change_keeps_the_integral() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Speed, 10.0);
+        for _ in 0..10 {
+            c.step(&Measured::default(), 0.001, 20.0);
+        }
+        let held = c.speed.integral();
+        c.set_speed_config(PidConfig::new(0.0, 10.0, 0.0).with_output_limit(20.0))
+            .unwrap();
+        assert_eq!(c.speed.integral(), held);
+        // kp is now 0: the output is the integral (plus this step's increment).
+        let out = c.step(&Measured::default(), 0.001, 20.0);
+        assert!((out - (held + 10.0 * 10.0 * 0.001)).abs() < 1e-5, "{out}");
+        assert!(
+            c.set_speed_config(PidConfig::new(f32::NAN, 0.0, 0.0))
+                .is_err()
+        );
     }
 
     #[test]
@@ -239,20 +373,20 @@ mod tests {
         let mut c = cascade();
         c.set_target(ControlMode::Angle, 10.0);
         let m = Measured::default();
-        c.step(&m, 0.001);
+        c.step(&m, 0.001, 20.0);
         assert!((c.speed_target_rpm() - 100.0).abs() < 1e-4); // first tick runs the angle loop
         let m2 = Measured {
             angle_deg: 5.0,
             ..Default::default()
         };
         for _ in 0..9 {
-            c.step(&m2, 0.001);
+            c.step(&m2, 0.001, 20.0);
             assert!(
                 (c.speed_target_rpm() - 100.0).abs() < 1e-4,
                 "held between runs"
             );
         }
-        c.step(&m2, 0.001);
+        c.step(&m2, 0.001, 20.0);
         assert!((c.speed_target_rpm() - 50.0).abs() < 1e-4);
     }
 
@@ -265,10 +399,10 @@ mod tests {
             ..Default::default()
         };
         c.set_target(ControlMode::Angle, 370.0); // = 10°: +20° from 350°
-        c.step(&m, 0.001);
+        c.step(&m, 0.001, 20.0);
         assert!((c.speed_target_rpm() - 200.0).abs() < 1e-3);
         c.set_target(ControlMode::TotalAngle, 10.0); // -340° the linear way: limited to -300
-        c.step(&m, 0.001);
+        c.step(&m, 0.001, 20.0);
         assert!((c.speed_target_rpm() + 300.0).abs() < 1e-3);
     }
 
@@ -276,11 +410,11 @@ mod tests {
     fn disabled_outputs_zero_and_reset_clears_command() {
         let mut c = cascade();
         c.set_target(ControlMode::Current, 3.0);
-        c.step(&Measured::default(), 0.001);
+        c.step(&Measured::default(), 0.001, 20.0);
         c.set_target(ControlMode::Disabled, 0.0);
-        assert_eq!(c.step(&Measured::default(), 0.001), 0.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 0.0);
         c.set_target(ControlMode::Speed, 0.0);
         c.reset();
-        assert_eq!(c.step(&Measured::default(), 0.001), 0.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 0.0);
     }
 }

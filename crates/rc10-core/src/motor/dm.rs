@@ -289,16 +289,28 @@ struct DmState {
     wraps: i32,
     velocity_rad_s: f32,
     torque_nm: f32,
-    mos_temp_c: f32,
-    rotor_temp_c: f32,
+    mos_temp_c: Option<f32>,
+    rotor_temp_c: Option<f32>,
     liveness: Liveness,
+    /// Feed-forward torque added in speed and angle modes, N·m.
+    feed_forward_nm: f32,
+    /// Software homing: added to the motor's own position, rad.
+    home_offset_rad: f32,
+    pending_home_deg: Option<f32>,
     torque_ff_nm: f32,
     out: [u8; 8],
 }
 
 impl DmState {
+    /// What the MIT position field's frame (the motor's reported, wrapping position) must be
+    /// shifted by to give the output's multi-turn position after homing, rad.
+    fn frame_offset_rad(&self, p_max: f32) -> f32 {
+        self.wraps as f32 * 2.0 * p_max + self.home_offset_rad
+    }
+
+    /// The output's multi-turn position after homing, rad.
     fn total_position_rad(&self, p_max: f32) -> f32 {
-        self.position_rad.unwrap_or(0.0) + self.wraps as f32 * 2.0 * p_max
+        self.position_rad.unwrap_or(0.0) + self.frame_offset_rad(p_max)
     }
 }
 
@@ -324,9 +336,12 @@ impl DmMotor {
             return Err(DmError::InvalidId);
         }
         let l = config.limits;
-        if !(l.p_max_rad.is_finite() && l.p_max_rad > 0.0)
-            || !(l.v_max_rad_s.is_finite() && l.v_max_rad_s > 0.0)
-            || !(l.t_max_nm.is_finite() && l.t_max_nm > 0.0)
+        const fn positive(x: f32) -> bool {
+            x.is_finite() && x > 0.0
+        }
+        if !positive(l.p_max_rad)
+            || !positive(l.v_max_rad_s)
+            || !positive(l.t_max_nm)
             || !ok(config.speed_kd, KD_MAX)
             || !ok(config.position_kp, KP_MAX)
             || !ok(config.position_kd, KD_MAX)
@@ -346,9 +361,12 @@ impl DmMotor {
                 wraps: 0,
                 velocity_rad_s: 0.0,
                 torque_nm: 0.0,
-                mos_temp_c: 0.0,
-                rotor_temp_c: 0.0,
+                mos_temp_c: None,
+                rotor_temp_c: None,
                 liveness: Liveness::NEW,
+                feed_forward_nm: 0.0,
+                home_offset_rad: 0.0,
+                pending_home_deg: None,
                 torque_ff_nm: 0.0,
                 out: [0; 8],
             })),
@@ -376,19 +394,11 @@ impl DmMotor {
         }
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
-            s.mode = ControlMode::Current;
+            s.mode = ControlMode::Torque;
             s.target = c.torque_nm;
             s.user_mit = c;
         });
         Ok(())
-    }
-
-    /// Commands a torque in N·m (MIT with zero gains).
-    pub fn set_target_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
-        self.set_mit(MitCommand {
-            torque_nm,
-            ..MitCommand::ZERO_TORQUE
-        })
     }
 
     /// Sends `special` once, on the next tick, instead of that tick's MIT command.
@@ -406,8 +416,8 @@ impl DmMotor {
         self.state.lock(|s| s.borrow().torque_nm)
     }
 
-    /// MOSFET and rotor temperatures in °C.
-    pub fn temperatures_c(&self) -> (f32, f32) {
+    /// MOSFET and rotor temperatures in °C (`None` before the first feedback).
+    pub fn temperatures_c(&self) -> (Option<f32>, Option<f32>) {
         self.state.lock(|s| {
             let s = s.borrow();
             (s.mos_temp_c, s.rotor_temp_c)
@@ -430,45 +440,69 @@ impl DmMotor {
         let c = &self.config;
         let p_max = c.limits.p_max_rad;
         match s.mode {
-            ControlMode::Disabled | ControlMode::Voltage => MitCommand::ZERO_TORQUE,
-            ControlMode::Current => s.user_mit,
+            ControlMode::Disabled | ControlMode::Voltage | ControlMode::Current => {
+                MitCommand::ZERO_TORQUE
+            }
+            ControlMode::Torque => s.user_mit,
             ControlMode::Speed => MitCommand {
                 velocity_rad_s: s.target * TAU / 60.0,
                 kd: c.speed_kd,
+                torque_nm: s.feed_forward_nm,
                 ..MitCommand::ZERO_TORQUE
             },
             ControlMode::Angle | ControlMode::TotalAngle => {
-                // The MIT position field is the motor's own (wrapped) position: express the
-                // target relative to it so the motor turns the intended way.
-                let now_rad = s.position_rad.unwrap_or(0.0);
-                let total_now = s.total_position_rad(p_max);
-                let error_rad = if s.mode == ControlMode::Angle {
-                    deg_to_rad(wrap_signed(s.target - rad_to_deg(total_now), 360.0))
+                // MIT position commands are in the motor's own frame, which spans ±p_max.
+                let motor_now = s.position_rad.unwrap_or(0.0);
+                let position_rad = if s.mode == ControlMode::Angle {
+                    // The shortest way round, or if that crosses ±p_max, the same output
+                    // angle a whole turn the other way (p_max ≥ π, so one of them is in range).
+                    let error_rad = deg_to_rad(wrap_signed(
+                        s.target - rad_to_deg(s.total_position_rad(p_max)),
+                        360.0,
+                    ));
+                    let short = motor_now + error_rad;
+                    if short > p_max {
+                        short - TAU
+                    } else if short < -p_max {
+                        short + TAU
+                    } else {
+                        short
+                    }
                 } else {
-                    deg_to_rad(s.target) - total_now
+                    // Checked against the range when set; should the motor have been pushed
+                    // across the range end since, the field is clamped on packing.
+                    deg_to_rad(s.target) - s.frame_offset_rad(p_max)
                 };
                 MitCommand {
-                    position_rad: now_rad + error_rad,
+                    position_rad,
                     kp: c.position_kp,
                     kd: c.position_kd,
+                    torque_nm: s.feed_forward_nm,
                     ..MitCommand::ZERO_TORQUE
                 }
             }
         }
     }
+
+    /// The multi-turn output angles, in degrees, that a total-angle target can have now: the
+    /// MIT position field spans ±`p_max` of the motor's own frame (shifted by homing and by
+    /// any wrap of the reported position).
+    pub fn total_angle_range_deg(&self) -> (f32, f32) {
+        let p_max = self.config.limits.p_max_rad;
+        self.state.lock(|s| {
+            let s = s.borrow();
+            let offset = s.frame_offset_rad(p_max);
+            (rad_to_deg(-p_max + offset), rad_to_deg(p_max + offset))
+        })
+    }
 }
 
 impl CanNode for DmMotor {
     fn bus_usage(&self) -> BusUsage {
-        BusUsage {
-            listen: Some(IdFilter::standard(self.config.master_id)),
-            // The motor answers every command frame.
-            feedback_hz: 1000,
-            feedback_extended: false,
-            command_slot: None,
-            command_frames_per_tick: 1,
-            command_extended: false,
-        }
+        // The motor answers every command frame on its master ID.
+        BusUsage::NONE
+            .listening(IdFilter::standard(self.config.master_id), 1000)
+            .sending(IdFilter::standard(self.can_id), 1)
     }
 
     fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
@@ -486,17 +520,17 @@ impl CanNode for DmMotor {
             let mut s = s.borrow_mut();
             if let Some(prev) = s.position_rad {
                 if p - prev > l.p_max_rad {
-                    s.wraps -= 1;
+                    s.wraps = s.wraps.saturating_sub(1);
                 } else if prev - p > l.p_max_rad {
-                    s.wraps += 1;
+                    s.wraps = s.wraps.saturating_add(1);
                 }
             }
             s.position_rad = Some(p);
             s.velocity_rad_s = uint_to_float(v_raw, l.v_max_rad_s, 12);
             s.torque_nm = uint_to_float(t_raw, l.t_max_nm, 12);
             s.status = DmStatus::from_code(d[0] >> 4);
-            s.mos_temp_c = f32::from(d[6]);
-            s.rotor_temp_c = f32::from(d[7]);
+            s.mos_temp_c = Some(f32::from(d[6]));
+            s.rotor_temp_c = Some(f32::from(d[7]));
             s.liveness.record_feedback(now);
         });
         Ok(())
@@ -508,6 +542,14 @@ impl CanNode for DmMotor {
             let mut s = cell.borrow_mut();
             s.liveness.check(&health, now);
             let online = s.liveness.is_online();
+            if let Some(deg) = s.pending_home_deg
+                && s.position_rad.is_some()
+            {
+                let p_max = self.config.limits.p_max_rad;
+                s.home_offset_rad = 0.0;
+                s.home_offset_rad = deg_to_rad(deg) - s.total_position_rad(p_max);
+                s.pending_home_deg = None;
+            }
             let mit = if online {
                 self.mit_for(&s)
             } else {
@@ -538,7 +580,7 @@ impl CanNode for DmMotor {
 
 impl Motor for DmMotor {
     /// Damiao motors take torque, not current: use
-    /// [`set_target_torque_nm`](DmMotor::set_target_torque_nm).
+    /// [`set_target_torque_nm`](Motor::set_target_torque_nm).
     fn set_target_current(&self, _amps: f32) -> Result<(), TargetError> {
         Err(TargetError::Unsupported)
     }
@@ -547,15 +589,55 @@ impl Motor for DmMotor {
         self.set(ControlMode::Speed, rpm)
     }
 
+    /// Reached through the MIT position field the shortest way round, unless that way would
+    /// cross the end of the motor's ±`p_max` position range: then the same output angle is
+    /// reached a turn the other way (the field cannot go beyond the range).
     fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
         self.set(ControlMode::Angle, angle_deg)
     }
 
-    /// The target is reached through the MIT position field, so it must lie within `±p_max`
-    /// of the present position (12.5 rad ≈ 716° by default); farther targets are approached
-    /// up to that distance and then continued on the following ticks.
+    /// Reached through the MIT position field, so the target must lie within
+    /// [`total_angle_range_deg`](DmMotor::total_angle_range_deg) (±`p_max`: ±716° with the
+    /// factory 12.5 rad, shifted by homing); beyond it: [`TargetError::OutOfRange`] and the
+    /// previous target stays. Widen PMAX in Damiao's tool (and [`MitLimits`]) for more.
     fn set_target_total_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        if !angle_deg.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        let (low, high) = self.total_angle_range_deg();
+        if angle_deg < low || angle_deg > high {
+            return Err(TargetError::OutOfRange);
+        }
         self.set(ControlMode::TotalAngle, angle_deg)
+    }
+
+    /// MIT with zero gains and this feed-forward torque (mode [`ControlMode::Torque`]).
+    fn set_target_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        self.set_mit(MitCommand {
+            torque_nm,
+            ..MitCommand::ZERO_TORQUE
+        })
+    }
+
+    /// Sent in the MIT torque field next to the speed and position commands.
+    fn set_feed_forward_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        if !torque_nm.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.state
+            .lock(|s| s.borrow_mut().feed_forward_nm = torque_nm);
+        Ok(())
+    }
+
+    /// Software homing in the driver (the motor's own zero is not touched; for that send
+    /// [`DmSpecial::SaveZero`]).
+    fn set_total_angle_here_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        if !angle_deg.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.state
+            .lock(|s| s.borrow_mut().pending_home_deg = Some(angle_deg));
+        Ok(())
     }
 
     fn disable(&self) {
@@ -566,15 +648,19 @@ impl Motor for DmMotor {
         self.state.lock(|cell| {
             let s = cell.borrow();
             let total_deg = rad_to_deg(s.total_position_rad(self.config.limits.p_max_rad));
+            let has_position = s.position_rad.is_some();
             MotorState {
                 online: s.liveness.is_online(),
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.velocity_rad_s * 60.0 / TAU,
-                angle_deg: wrap_deg_360(total_deg),
-                total_angle_deg: total_deg,
+                angle_deg: has_position.then(|| wrap_deg_360(total_deg)),
+                total_angle_deg: has_position.then_some(total_deg),
                 current_amps: None,
-                temperature_c: Some(s.rotor_temp_c.max(s.mos_temp_c)),
+                temperature_c: match (s.rotor_temp_c, s.mos_temp_c) {
+                    (Some(r), Some(m)) => Some(r.max(m)),
+                    (r, m) => r.or(m),
+                },
                 command: s.torque_ff_nm,
                 offline_events: s.liveness.offline_events(),
                 last_feedback: s.liveness.last_feedback(),
@@ -680,11 +766,11 @@ mod tests {
         m.update_feedback(&feedback(1, 1, 0xFFFF, 0x800, 0xFFF, 40, 55), T0)
             .unwrap();
         let s = m.state();
-        assert!((s.total_angle_deg - rad_to_deg(12.5)).abs() < 1e-3);
+        assert!((s.total_angle_deg.unwrap() - rad_to_deg(12.5)).abs() < 1e-3);
         assert!((s.speed_rpm - 0.00733 * 60.0 / TAU).abs() < 1e-3);
         assert_eq!(m.torque_nm(), 10.0);
         assert_eq!(m.status(), DmStatus::Enabled);
-        assert_eq!(m.temperatures_c(), (40.0, 55.0));
+        assert_eq!(m.temperatures_c(), (Some(40.0), Some(55.0)));
         assert_eq!(s.current_amps, None);
     }
 
@@ -709,14 +795,14 @@ mod tests {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
         m.update_feedback(&feedback(1, 1, 0xFFF0, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
-        let before = m.total_angle_deg();
+        let before = m.total_angle_deg().unwrap();
         // Wraps from +12.5 to -12.5 rad while turning forward by a few counts.
         m.update_feedback(&feedback(1, 1, 0x0010, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
         // Codes 65535 (+12.5 rad) and 0 (-12.5 rad) are the same point on the 25 rad circle,
         // so 0xFFF0 → 0x0010 is 15 + 16 = 31 codes of 25/65535 rad.
         let step_deg = rad_to_deg(31.0 * 25.0 / 65535.0);
-        assert!((m.total_angle_deg() - before - step_deg).abs() < 0.01);
+        assert!((m.total_angle_deg().unwrap() - before - step_deg).abs() < 0.01);
     }
 
     #[test]
@@ -803,5 +889,143 @@ mod tests {
         assert_eq!(DmMotor::new(1, cfg).unwrap_err(), DmError::InvalidLimit);
         let m = DmMotor::new(1, DmConfig::new(0x11)).unwrap();
         assert_eq!(m.set_target_current(1.0), Err(TargetError::Unsupported));
+    }
+
+    /// The MIT position field of a packed command, in rad.
+    fn packed_position_rad(bytes: &[u8; 8]) -> f32 {
+        uint_to_float(
+            u32::from(u16::from_be_bytes([bytes[0], bytes[1]])),
+            12.5,
+            16,
+        )
+    }
+
+    /// The raw 16-bit code of a position in rad (default ±12.5 rad range).
+    fn position_code(rad: f32) -> u16 {
+        float_to_uint(rad, 12.5, 16) as u16
+    }
+
+    #[test]
+    fn angle_target_across_the_range_end_picks_the_equivalent_angle_inside() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        // The motor reports 12.3 rad, near the +12.5 rad end of its position range.
+        m.update_feedback(
+            &feedback(1, 1, position_code(12.3), 0x7FF, 0x7FF, 30, 30),
+            T0,
+        )
+        .unwrap();
+        let here_deg = m.angle_deg().unwrap();
+        // 1 rad further on: the short way would be 13.3 rad, beyond the field's range (it
+        // would park at 12.5). The same output angle a turn back, 13.3 - 2π = 7.017 rad, is
+        // inside.
+        m.set_target_angle_deg(here_deg + rad_to_deg(1.0)).unwrap();
+        let p = packed_position_rad(&packed(&m, T0));
+        assert!((p - (12.3 + 1.0 - TAU)).abs() < 2e-3, "p = {p}");
+        // And near the other end, the other way.
+        m.update_feedback(
+            &feedback(1, 1, position_code(-12.3), 0x7FF, 0x7FF, 30, 30),
+            T0,
+        )
+        .unwrap();
+        let here_deg = m.angle_deg().unwrap();
+        m.set_target_angle_deg(here_deg - rad_to_deg(1.0)).unwrap();
+        let p = packed_position_rad(&packed(&m, T0));
+        assert!((p - (-12.3 - 1.0 + TAU)).abs() < 2e-3, "p = {p}");
+    }
+
+    #[test]
+    fn total_angle_target_beyond_the_position_range_is_rejected() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(
+            &feedback(1, 1, position_code(0.0), 0x7FF, 0x7FF, 30, 30),
+            T0,
+        )
+        .unwrap();
+        m.set_target_total_angle_deg(700.0).unwrap(); // 12.22 rad: inside ±12.5
+        let (low, high) = m.total_angle_range_deg();
+        assert!((high - rad_to_deg(12.5)).abs() < 0.01 && (low + high).abs() < 0.01);
+        assert_eq!(
+            m.set_target_total_angle_deg(800.0),
+            Err(TargetError::OutOfRange)
+        );
+        assert_eq!(m.state().target, 700.0); // the previous target stays
+        let p = packed_position_rad(&packed(&m, T0));
+        assert!((p - deg_to_rad(700.0)).abs() < 2e-3, "p = {p}");
+    }
+
+    #[test]
+    fn state_is_none_until_the_motor_has_reported() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let s = m.state();
+        assert_eq!(
+            (
+                s.angle_deg,
+                s.total_angle_deg,
+                s.temperature_c,
+                s.current_amps
+            ),
+            (None, None, None, None)
+        );
+        assert_eq!(m.temperatures_c(), (None, None));
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 40, 55), T0)
+            .unwrap();
+        assert_eq!(m.state().temperature_c, Some(55.0));
+    }
+
+    #[test]
+    fn torque_through_the_trait_and_feed_forward_in_speed_mode() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let motor: &dyn Motor = &m;
+        motor.set_target_torque_nm(2.5).unwrap();
+        assert_eq!(motor.mode(), ControlMode::Torque);
+        let expect = MitCommand {
+            torque_nm: 2.5,
+            ..MitCommand::ZERO_TORQUE
+        };
+        assert_eq!(packed(&m, T0), expect.pack(&MitLimits::DEFAULT));
+        motor.set_feed_forward_torque_nm(-1.0).unwrap();
+        motor.set_target_rpm(60.0).unwrap();
+        let expect = MitCommand {
+            velocity_rad_s: TAU,
+            kd: 1.0,
+            torque_nm: -1.0,
+            ..MitCommand::ZERO_TORQUE
+        };
+        assert_eq!(packed(&m, T0), expect.pack(&MitLimits::DEFAULT));
+        assert_eq!(motor.state().command, -1.0);
+    }
+
+    #[test]
+    fn homing_shifts_reported_angles_and_targets() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(
+            &feedback(1, 1, position_code(2.0), 0x7FF, 0x7FF, 30, 30),
+            T0,
+        )
+        .unwrap();
+        m.set_total_angle_here_deg(0.0).unwrap();
+        packed(&m, T0); // the tick applies it
+        assert!(m.total_angle_deg().unwrap().abs() < 0.01);
+        // Total-angle 90° now means 2 rad + π/2 in the motor's own frame.
+        m.set_target_total_angle_deg(90.0).unwrap();
+        let p = packed_position_rad(&packed(&m, T0));
+        assert!(
+            (p - (2.0 + core::f32::consts::FRAC_PI_2)).abs() < 2e-3,
+            "p = {p}"
+        );
+    }
+
+    #[test]
+    fn bus_usage_declares_the_command_id_and_the_master_id() {
+        let m = DmMotor::new(0x03, DmConfig::new(0x13)).unwrap();
+        let u = m.bus_usage();
+        assert!(u.sends.matches(CanFrame::standard(0x03, &[]).unwrap().id()));
+        assert!(
+            u.listen
+                .matches(CanFrame::standard(0x13, &[]).unwrap().id())
+        );
+        assert_eq!((u.frames_per_tick, u.feedback_hz), (1, 1000));
     }
 }

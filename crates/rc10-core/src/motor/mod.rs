@@ -46,8 +46,12 @@ pub enum ControlMode {
     /// Zero command (the initial mode, and after [`Motor::disable`]).
     #[default]
     Disabled,
-    /// Open-loop current (torque) command in amps.
+    /// Open-loop current (torque) command in amps. DJI motors also take torque targets this
+    /// way ([`Motor::set_target_torque_nm`] converts through the torque constant).
     Current,
+    /// Open-loop torque at the output shaft in N·m, for devices that take torque natively
+    /// (Damiao MIT: also a raw MIT command set with `DmMotor::set_mit`).
+    Torque,
     /// Open-loop voltage command: volts for a GM6020 in voltage mode, duty cycle (−1…1) for a
     /// VESC.
     Voltage,
@@ -68,6 +72,9 @@ pub enum TargetError {
     /// This motor (or its current configuration) has no such mode, e.g. a current target for
     /// a GM6020 configured for voltage mode.
     Unsupported,
+    /// The value is finite but outside what the device can do (a negative limit, or a Damiao
+    /// total-angle target beyond the motor's position range).
+    OutOfRange,
 }
 
 impl fmt::Display for TargetError {
@@ -75,6 +82,7 @@ impl fmt::Display for TargetError {
         f.write_str(match self {
             Self::NotFinite => "motor target is NaN or infinite",
             Self::Unsupported => "motor does not support this control mode",
+            Self::OutOfRange => "motor target or limit out of the device's range",
         })
     }
 }
@@ -82,6 +90,19 @@ impl fmt::Display for TargetError {
 impl core::error::Error for TargetError {}
 
 /// Everything an application may want to read about a motor, from one consistent moment.
+///
+/// Every field means the same on every device. A quantity the device does not report, or has
+/// not reported yet (no feedback since start), is `None`, never a made-up zero.
+///
+/// `command` is in the unit the device is commanded in:
+///
+/// | device | `command` |
+/// |---|---|
+/// | DJI M3508 / M2006 / GM6020 in current mode | amps |
+/// | DJI GM6020 in voltage mode | volts |
+/// | VESC current or brake (brake negative) | amps |
+/// | VESC duty, eRPM or position (the VESC runs the loop) | 0 |
+/// | Damiao MIT | N·m of feed-forward torque (the motor adds its kp/kd terms) |
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct MotorState {
@@ -89,23 +110,22 @@ pub struct MotorState {
     pub online: bool,
     /// Current control mode.
     pub mode: ControlMode,
-    /// The active target in the mode's unit (amps, volts, rpm or degrees).
+    /// The active target in the mode's unit (amps, N·m, volts, rpm or degrees).
     pub target: f32,
-    /// Output-shaft speed in rpm.
+    /// Output-shaft speed in rpm (0 before the first feedback: see `last_feedback`).
     pub speed_rpm: f32,
-    /// Output-shaft angle within one turn, [0, 360) degrees.
-    pub angle_deg: f32,
-    /// Output-shaft multi-turn angle in degrees.
-    pub total_angle_deg: f32,
+    /// Output-shaft angle within one turn, [0, 360) degrees, where the device reports one.
+    pub angle_deg: Option<f32>,
+    /// Output-shaft multi-turn angle in degrees, where the device reports one.
+    pub total_angle_deg: Option<f32>,
     /// Measured torque current in amps, where the device reports a current (a Damiao motor
     /// reports torque instead: see its driver).
     pub current_amps: Option<f32>,
-    /// Temperature in °C, where the device reports one.
+    /// Temperature in °C, where the device reports one (the hottest it reports: winding,
+    /// rotor or MOSFET; see each driver).
     pub temperature_c: Option<f32>,
-    /// The command sent last tick, in the device's command unit: amps (DJI current mode,
-    /// VESC current or brake), volts (GM6020 voltage mode) or N·m of feed-forward torque
-    /// (Damiao); zero while offline. Devices that run their own loop on a speed or position
-    /// command (VESC eRPM, duty, position) report zero.
+    /// The command applied last tick, after every clamp and derating, in the device's command
+    /// unit (see the table above); zero while offline.
     pub command: f32,
     /// Times the motor went offline since start.
     pub offline_events: u32,
@@ -137,6 +157,40 @@ pub trait Motor: Sync {
     /// Holds a multi-turn output-shaft angle in degrees.
     fn set_target_total_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError>;
 
+    /// Commands a torque at the output shaft in N·m: natively where the device takes torque
+    /// (Damiao), through the torque constant where it takes current (DJI, VESC with a
+    /// configured torque constant). The default reports [`TargetError::Unsupported`].
+    fn set_target_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        let _ = torque_nm;
+        Err(TargetError::Unsupported)
+    }
+
+    /// A torque in N·m at the output shaft added to what the speed and angle loops command
+    /// (gravity compensation for an arm or a gimbal pitch). Kept until changed; 0 removes it.
+    /// Not added in open-loop modes. The default reports [`TargetError::Unsupported`].
+    fn set_feed_forward_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        let _ = torque_nm;
+        Err(TargetError::Unsupported)
+    }
+
+    /// Limits the current the motor is commanded, in amps, from the next tick on (chassis
+    /// power limiting): the ESC's own range still applies on top, and the loops' anti-windup
+    /// works against the lower of the two. Negative is [`TargetError::OutOfRange`]; infinity
+    /// means "the ESC's range". The default reports [`TargetError::Unsupported`].
+    fn set_current_limit_amps(&self, amps: f32) -> Result<(), TargetError> {
+        let _ = amps;
+        Err(TargetError::Unsupported)
+    }
+
+    /// Homing: declares that the output shaft is at multi-turn angle `angle_deg` now (0 for
+    /// "here is zero"). Applied by the next tick that has feedback; single-turn angles and
+    /// total-angle targets refer to the new origin from then on. The default reports
+    /// [`TargetError::Unsupported`].
+    fn set_total_angle_here_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        let _ = angle_deg;
+        Err(TargetError::Unsupported)
+    }
+
     /// Stops driving the motor (zero command) until a new target is set.
     fn disable(&self);
 
@@ -151,13 +205,13 @@ pub trait Motor: Sync {
         self.state().speed_rpm
     }
 
-    /// Output-shaft angle in [0, 360) degrees.
-    fn angle_deg(&self) -> f32 {
+    /// Output-shaft angle in [0, 360) degrees, where the device reports one.
+    fn angle_deg(&self) -> Option<f32> {
         self.state().angle_deg
     }
 
-    /// Output-shaft multi-turn angle in degrees.
-    fn total_angle_deg(&self) -> f32 {
+    /// Output-shaft multi-turn angle in degrees, where the device reports one.
+    fn total_angle_deg(&self) -> Option<f32> {
         self.state().total_angle_deg
     }
 
@@ -298,7 +352,16 @@ impl Liveness {
 
     /// Re-evaluates at `now` under `health`; returns `true` exactly when the motor has just
     /// gone offline (so the driver can zero its command and reset its loops once).
+    ///
+    /// A feedback time later than `now` (a receiver that stamped a frame after this tick
+    /// read the clock, or a bogus timestamp far in the future) is clamped to `now`: it counts
+    /// as fresh for one offline timeout, never longer.
     pub fn check(&mut self, health: &HealthConfig, now: Instant) -> bool {
+        if let Some(t) = self.last_feedback
+            && t > now
+        {
+            self.last_feedback = Some(now);
+        }
         let online = health.is_online(self.last_feedback, now);
         let went_offline = self.online && !online;
         if went_offline {
@@ -358,6 +421,20 @@ mod tests {
         assert!(l.check(&h, Instant::from_millis(200)));
         assert!(!l.check(&h, Instant::from_millis(300)));
         assert_eq!((l.is_online(), l.offline_events()), (false, 1));
+    }
+
+    #[test]
+    fn feedback_stamped_far_in_the_future_does_not_keep_a_motor_online() {
+        let h = HealthConfig::DEFAULT;
+        let mut l = Liveness::NEW;
+        let now = Instant::from_millis(1000);
+        l.record_feedback(now + Duration::from_secs(3600)); // a bogus stamp an hour ahead
+        assert!(!l.check(&h, now));
+        assert!(l.is_online());
+        assert_eq!(l.last_feedback(), Some(now)); // clamped
+        // Nothing else arrives: offline one timeout later, not an hour later.
+        assert!(l.check(&h, now + Duration::from_millis(101)));
+        assert!(!l.is_online());
     }
 
     #[test]

@@ -57,6 +57,67 @@ pub mod packet {
     pub const STATUS_5: u8 = 27;
 }
 
+/// Which status packets a VESC is set to broadcast (VESC Tool: App Settings → General →
+/// "CAN Status Message Mode"), each at [`VescConfig::status_hz`]. Every one is a frame on the
+/// bus, so the set counts in the frame budget and each is a listen ID of the node.
+///
+/// ```
+/// use rc10_core::motor::vesc::VescStatusSet;
+/// let set = VescStatusSet::STATUS_1.with(VescStatusSet::STATUS_4);
+/// assert_eq!(set.count(), 2);
+/// assert!(set.contains(VescStatusSet::STATUS_4));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VescStatusSet(u8);
+
+impl VescStatusSet {
+    /// STATUS (packet 9): eRPM, current, duty. This driver needs it (it is what keeps the
+    /// motor online).
+    pub const STATUS_1: Self = Self(1 << 0);
+    /// STATUS_2 (packet 14): amp-hours (read, not used).
+    pub const STATUS_2: Self = Self(1 << 1);
+    /// STATUS_3 (packet 15): watt-hours (read, not used).
+    pub const STATUS_3: Self = Self(1 << 2);
+    /// STATUS_4 (packet 16): temperatures, input current, PID position.
+    pub const STATUS_4: Self = Self(1 << 3);
+    /// STATUS_5 (packet 27): tachometer, input voltage (read, not used).
+    pub const STATUS_5: Self = Self(1 << 4);
+    /// STATUS 1 to 5, VESC Tool's "1_2_3_4_5".
+    pub const ALL: Self = Self(0b1_1111);
+
+    const PACKETS: [(Self, u8); 5] = [
+        (Self::STATUS_1, packet::STATUS),
+        (Self::STATUS_2, packet::STATUS_2),
+        (Self::STATUS_3, packet::STATUS_3),
+        (Self::STATUS_4, packet::STATUS_4),
+        (Self::STATUS_5, packet::STATUS_5),
+    ];
+
+    /// This set plus `other`.
+    #[must_use]
+    pub const fn with(self, other: Self) -> Self {
+        Self(self.0 | other.0)
+    }
+
+    /// Whether every packet of `other` is in the set.
+    pub const fn contains(self, other: Self) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    /// How many packets the set holds.
+    pub const fn count(self) -> u32 {
+        self.0.count_ones()
+    }
+
+    /// Whether status packet number `packet` is in the set.
+    pub fn contains_packet(self, packet: u8) -> bool {
+        Self::PACKETS
+            .iter()
+            .any(|(flag, p)| *p == packet && self.contains(*flag))
+    }
+}
+
 /// A command as the VESC receives it (physical units of the motor, before scaling).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -108,15 +169,21 @@ pub struct VescConfig {
     pub max_speed_rpm: f32,
     /// Send a brake current (amps) instead of `SET_RPM 0` for a zero speed target.
     pub zero_speed_brake_amps: Option<f32>,
-    /// STATUS frames per second the VESC is set to send (VESC Tool, "CAN status rate").
+    /// Frames per second the VESC sends of each status packet (VESC Tool, "CAN status rate").
     pub status_hz: u32,
+    /// Which status packets it sends (default STATUS_1 only; add STATUS_4 for temperatures
+    /// and the angle).
+    pub status_packets: VescStatusSet,
+    /// Output-shaft torque per motor amp in N·m/A (motor kt × gear ratio), for
+    /// [`Motor::set_target_torque_nm`]; `None` (default): torque targets are unsupported.
+    pub torque_constant_nm_per_amp: Option<f32>,
     /// Offline timeout and multi-turn policy (thermal limits are enforced by the VESC).
     pub health: HealthConfig,
 }
 
 impl VescConfig {
     /// Direct drive with `pole_pairs`, 60 A, 20 A brake, 10 000 rpm, no zero-speed brake,
-    /// status at 1 kHz, 100 ms offline timeout.
+    /// STATUS_1 at 1 kHz, no torque constant, 100 ms offline timeout.
     pub const fn new(pole_pairs: u8) -> Self {
         Self {
             pole_pairs,
@@ -126,6 +193,8 @@ impl VescConfig {
             max_speed_rpm: 10_000.0,
             zero_speed_brake_amps: None,
             status_hz: 1000,
+            status_packets: VescStatusSet::STATUS_1,
+            torque_constant_nm_per_amp: None,
             health: HealthConfig::DEFAULT,
         }
     }
@@ -164,10 +233,13 @@ struct VescState {
     duty_target: Option<f32>,
     brake_target: Option<f32>,
     erpm: f32,
-    current_amps: f32,
+    current_amps: Option<f32>,
     duty: f32,
     fet_temp_c: Option<f32>,
     motor_temp_c: Option<f32>,
+    /// STATUS_4's PID position: rotor degrees.
+    pid_position_deg: Option<f32>,
+    user_current_limit: f32,
     liveness: Liveness,
     command: VescCommand,
 }
@@ -215,6 +287,11 @@ impl VescMotor {
         {
             return Err(VescError::InvalidLimit);
         }
+        if let Some(kt) = config.torque_constant_nm_per_amp
+            && !(kt.is_finite() && kt > 0.0)
+        {
+            return Err(VescError::InvalidLimit);
+        }
         Ok(Self {
             vesc_id,
             config,
@@ -224,10 +301,12 @@ impl VescMotor {
                 duty_target: None,
                 brake_target: None,
                 erpm: 0.0,
-                current_amps: 0.0,
+                current_amps: None,
                 duty: 0.0,
                 fet_temp_c: None,
                 motor_temp_c: None,
+                pid_position_deg: None,
+                user_current_limit: f32::INFINITY,
                 liveness: Liveness::NEW,
                 command: VescCommand::Current(0.0),
             })),
@@ -259,9 +338,14 @@ impl VescMotor {
         self.state.lock(|s| s.borrow().duty)
     }
 
-    /// Last reported motor temperature in °C (from STATUS_4).
+    /// Last reported motor (winding) temperature in °C (from STATUS_4).
     pub fn motor_temperature_c(&self) -> Option<f32> {
         self.state.lock(|s| s.borrow().motor_temp_c)
+    }
+
+    /// Last reported MOSFET temperature in °C (from STATUS_4).
+    pub fn mosfet_temperature_c(&self) -> Option<f32> {
+        self.state.lock(|s| s.borrow().fet_temp_c)
     }
 
     /// The command the last tick produced.
@@ -297,10 +381,23 @@ impl VescMotor {
         match s.mode {
             ControlMode::Disabled => VescCommand::Current(0.0),
             ControlMode::Voltage => VescCommand::Duty(saturate(s.duty_target.unwrap_or(0.0), 1.0)),
-            ControlMode::Current => match s.brake_target {
-                Some(b) => VescCommand::Brake(saturate(b.abs(), c.max_brake_amps)),
-                None => VescCommand::Current(saturate(s.target, c.max_current_amps)),
-            },
+            ControlMode::Current | ControlMode::Torque => {
+                let limit = s.user_current_limit;
+                match s.brake_target {
+                    Some(b) => {
+                        VescCommand::Brake(saturate(saturate(b.abs(), c.max_brake_amps), limit))
+                    }
+                    None => {
+                        let amps = if s.mode == ControlMode::Torque {
+                            // Only settable with a torque constant; without one, no current.
+                            s.target / c.torque_constant_nm_per_amp.unwrap_or(f32::INFINITY)
+                        } else {
+                            s.target
+                        };
+                        VescCommand::Current(saturate(saturate(amps, c.max_current_amps), limit))
+                    }
+                }
+            }
             ControlMode::Speed => {
                 let rpm = saturate(s.target, c.max_speed_rpm);
                 match c.zero_speed_brake_amps {
@@ -314,24 +411,36 @@ impl VescMotor {
     }
 }
 
+/// Command packets (0–4) and the next three (5–7, never a status): the IDs
+/// `(packet << 8) | vesc_id` with packet bits 3 and up zero.
+const COMMAND_ID_MASK: u32 = 0x1FFF_F8FF;
+
 impl CanNode for VescMotor {
     fn bus_usage(&self) -> BusUsage {
-        BusUsage {
-            listen: Some(IdFilter::extended_masked(u32::from(self.vesc_id), 0xFF)),
-            feedback_hz: self.config.status_hz,
-            feedback_extended: true,
-            command_slot: None,
-            command_frames_per_tick: 1,
-            command_extended: true,
+        let id = u32::from(self.vesc_id);
+        let mut usage = BusUsage::NONE.sending(IdFilter::extended_masked(id, COMMAND_ID_MASK), 1);
+        for (flag, packet) in VescStatusSet::PACKETS {
+            if self.config.status_packets.contains(flag) {
+                let filter = IdFilter::extended((u32::from(packet) << 8) | id);
+                usage = usage.listening(filter, self.config.status_hz);
+            }
         }
+        usage
     }
 
     fn matches_frame(&self, frame: &CanFrame) -> bool {
-        frame.is_extended() && (frame.raw_id() & 0xFF) == u32::from(self.vesc_id)
+        let id = frame.raw_id();
+        // VESC IDs are (packet << 8) | controller id with an 8-bit packet: bits 16–28 zero.
+        frame.is_extended()
+            && id >> 16 == 0
+            && (id & 0xFF) == u32::from(self.vesc_id)
+            && self.config.status_packets.contains_packet((id >> 8) as u8)
     }
 
     fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
-        let packet = (frame.raw_id() >> 8) as u8;
+        let Ok(packet) = u8::try_from(frame.raw_id() >> 8) else {
+            return Err(FrameError::Unsupported); // not a VESC ID: bits above the packet set
+        };
         match packet {
             packet::STATUS => {
                 let d = frame.data8().ok_or(FrameError::WrongLength {
@@ -343,7 +452,7 @@ impl CanNode for VescMotor {
                 self.state.lock(|s| {
                     let mut s = s.borrow_mut();
                     s.erpm = erpm as f32;
-                    s.current_amps = f32::from(current) / 10.0;
+                    s.current_amps = Some(f32::from(current) / 10.0);
                     s.duty = f32::from(duty) / 1000.0;
                     s.liveness.record_feedback(now);
                 });
@@ -355,10 +464,12 @@ impl CanNode for VescMotor {
                 })?;
                 let fet = i16::from_be_bytes([d[0], d[1]]);
                 let motor = i16::from_be_bytes([d[2], d[3]]);
+                let pid_pos = i16::from_be_bytes([d[6], d[7]]);
                 self.state.lock(|s| {
                     let mut s = s.borrow_mut();
                     s.fet_temp_c = Some(f32::from(fet) / 10.0);
                     s.motor_temp_c = Some(f32::from(motor) / 10.0);
+                    s.pid_position_deg = Some(f32::from(pid_pos) / 50.0);
                 });
                 Ok(())
             }
@@ -412,6 +523,31 @@ impl Motor for VescMotor {
         Err(TargetError::Unsupported)
     }
 
+    /// Through [`VescConfig::torque_constant_nm_per_amp`] into a current target (mode
+    /// [`ControlMode::Torque`], target in N·m); unsupported without it.
+    fn set_target_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        let Some(kt) = self.config.torque_constant_nm_per_amp else {
+            return Err(TargetError::Unsupported);
+        };
+        if !torque_nm.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        let _ = kt; // checked above; the tick divides by it
+        self.set(ControlMode::Torque, torque_nm, None, None)
+    }
+
+    fn set_current_limit_amps(&self, amps: f32) -> Result<(), TargetError> {
+        if amps.is_nan() {
+            return Err(TargetError::NotFinite);
+        }
+        if amps < 0.0 {
+            return Err(TargetError::OutOfRange);
+        }
+        self.state
+            .lock(|s| s.borrow_mut().user_current_limit = amps);
+        Ok(())
+    }
+
     fn disable(&self) {
         let _ = self.set(ControlMode::Disabled, 0.0, None, None);
     }
@@ -424,10 +560,18 @@ impl Motor for VescMotor {
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.erpm / self.config.erpm_per_rpm(),
-                angle_deg: 0.0,
-                total_angle_deg: 0.0,
-                current_amps: Some(s.current_amps),
-                temperature_c: s.fet_temp_c,
+                // STATUS_4's PID position is the rotor's: an output angle only in direct drive.
+                angle_deg: if self.config.gear == GearRatio::DIRECT {
+                    s.pid_position_deg.map(wrap_deg_360)
+                } else {
+                    None
+                },
+                total_angle_deg: None,
+                current_amps: s.current_amps,
+                temperature_c: match (s.fet_temp_c, s.motor_temp_c) {
+                    (Some(f), Some(m)) => Some(f.max(m)),
+                    (f, m) => f.or(m),
+                },
                 command: match s.command {
                     VescCommand::Current(a) => a,
                     VescCommand::Brake(a) => -a,
@@ -551,7 +695,9 @@ mod tests {
         // FET 45.6 °C = 456 = 0x01C8, motor 70.0 °C = 700 = 0x02BC.
         let f = CanFrame::extended(0x1005, &[0x01, 0xC8, 0x02, 0xBC, 0, 0, 0, 0]).unwrap();
         m.update_feedback(&f, T0).unwrap();
-        assert!((m.state().temperature_c.unwrap() - 45.6).abs() < 1e-4);
+        // The state reports the hotter of the two; each is named on its own.
+        assert_eq!(m.state().temperature_c, Some(70.0));
+        assert!((m.mosfet_temperature_c().unwrap() - 45.6).abs() < 1e-4);
         assert_eq!(m.motor_temperature_c(), Some(70.0));
         let unknown = CanFrame::extended(0x3F05, &[0; 8]).unwrap();
         assert_eq!(
@@ -593,5 +739,93 @@ mod tests {
             VescMotor::new(1, VescConfig::new(0)).unwrap_err(),
             VescError::ZeroPolePairs
         );
+    }
+
+    #[test]
+    fn status_set_is_declared_and_counted_in_the_budget() {
+        let mut cfg = VescConfig::new(7);
+        cfg.status_packets = VescStatusSet::STATUS_1.with(VescStatusSet::STATUS_4);
+        cfg.status_hz = 500;
+        let m = VescMotor::new(0x21, cfg).unwrap();
+        let u = m.bus_usage();
+        assert_eq!(u.feedback_hz, 1000); // two packets at 500 Hz
+        let ext = |id| CanFrame::extended(id, &[0; 8]).unwrap().id();
+        assert!(u.listen.matches(ext(0x0921)) && u.listen.matches(ext(0x1021)));
+        assert!(!u.listen.matches(ext(0x0E21))); // STATUS_2 not configured
+        // Commands SET_DUTY..SET_POS go out on (0..=4 << 8) | 0x21, nothing else of ours.
+        for packet in 0..=4u32 {
+            assert!(u.sends.matches(ext((packet << 8) | 0x21)));
+        }
+        assert!(!u.sends.matches(ext(0x0921)));
+        assert!(!u.sends.matches(ext(0x0122)));
+        // The whole set: five packets.
+        let mut all = VescConfig::new(7);
+        all.status_packets = VescStatusSet::ALL;
+        assert_eq!(
+            VescMotor::new(1, all).unwrap().bus_usage().feedback_hz,
+            5000
+        );
+    }
+
+    #[test]
+    fn ids_with_bits_above_the_packet_are_not_vesc_frames() {
+        let m = VescMotor::new(7, VescConfig::new(7)).unwrap();
+        // 0x1_0907 has STATUS's low 16 bits but is not a VESC ID.
+        let odd = CanFrame::extended(0x1_0907, &[0; 8]).unwrap();
+        assert!(!m.matches_frame(&odd));
+        assert_eq!(m.update_feedback(&odd, T0), Err(FrameError::Unsupported));
+        assert!(!m.is_online());
+        // STATUS_4 is not claimed unless configured.
+        assert!(!m.matches_frame(&CanFrame::extended(0x1007, &[0; 8]).unwrap()));
+        assert!(m.matches_frame(&CanFrame::extended(0x0907, &[0; 8]).unwrap()));
+    }
+
+    #[test]
+    fn angle_comes_from_status_4_in_direct_drive_only() {
+        let m = VescMotor::new(5, VescConfig::new(7)).unwrap();
+        assert_eq!(m.state().angle_deg, None);
+        // PID position 123.4° = 6170 = 0x181A.
+        let f = CanFrame::extended(0x1005, &[0, 0, 0, 0, 0, 0, 0x18, 0x1A]).unwrap();
+        m.update_feedback(&f, T0).unwrap();
+        assert!((m.state().angle_deg.unwrap() - 123.4).abs() < 1e-3);
+        assert_eq!(m.state().total_angle_deg, None);
+        let mut geared = VescConfig::new(7);
+        geared.gear = GearRatio::new(4, 1).unwrap();
+        let g = VescMotor::new(5, geared).unwrap();
+        g.update_feedback(&f, T0).unwrap();
+        assert_eq!(g.state().angle_deg, None); // the rotor's angle is not the output's
+    }
+
+    #[test]
+    fn torque_target_needs_a_torque_constant_and_current_limit_applies() {
+        let plain = VescMotor::new(3, VescConfig::new(7)).unwrap();
+        assert_eq!(
+            plain.set_target_torque_nm(1.0),
+            Err(TargetError::Unsupported)
+        );
+        let mut cfg = VescConfig::new(7);
+        cfg.torque_constant_nm_per_amp = Some(0.5);
+        let m = VescMotor::new(3, cfg).unwrap();
+        online(&m);
+        m.set_target_torque_nm(2.0).unwrap(); // 4 A = 4000 mA on SET_CURRENT
+        assert_eq!(packed(&m), (0x0103, 4_000i32.to_be_bytes().to_vec()));
+        assert_eq!(m.mode(), ControlMode::Torque);
+        m.set_current_limit_amps(2.5).unwrap();
+        assert_eq!(packed(&m).1, 2_500i32.to_be_bytes().to_vec());
+        m.set_brake_current(10.0).unwrap();
+        assert_eq!(packed(&m), (0x0203, 2_500i32.to_be_bytes().to_vec()));
+        assert_eq!(m.set_current_limit_amps(-1.0), Err(TargetError::OutOfRange));
+        let mut bad = VescConfig::new(7);
+        bad.torque_constant_nm_per_amp = Some(0.0);
+        assert_eq!(VescMotor::new(3, bad).unwrap_err(), VescError::InvalidLimit);
+    }
+
+    #[test]
+    fn state_has_no_current_before_status_1() {
+        let m = VescMotor::new(5, VescConfig::new(7)).unwrap();
+        assert_eq!(m.state().current_amps, None);
+        assert_eq!(m.state().temperature_c, None);
+        online(&m);
+        assert_eq!(m.state().current_amps, Some(0.0));
     }
 }

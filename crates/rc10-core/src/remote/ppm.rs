@@ -105,7 +105,8 @@ impl<const N: usize> PpmReceiver<N> {
                 // More channels than expected: drop this frame at its sync.
             }
         }
-        self.count += 1;
+        // Saturating: a stream of pulses that never sees a sync gap must not overflow.
+        self.count = self.count.saturating_add(1);
         None
     }
 
@@ -164,6 +165,21 @@ mod tests {
         );
         assert_eq!(train(&mut rx, &ok, t).unwrap().unwrap()[7], 1800);
         assert_eq!(rx.link().errors(), 1);
+    }
+
+    #[test]
+    fn pulse_counter_saturates_instead_of_overflowing() {
+        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
+        let now = Instant::from_millis(1);
+        rx.push_interval(5000, now);
+        rx.count = usize::MAX - 1;
+        assert_eq!(rx.push_interval(1500, now), None);
+        assert_eq!(rx.push_interval(1500, now), None);
+        assert_eq!(rx.count, usize::MAX);
+        assert_eq!(
+            rx.push_interval(5000, now),
+            Some(Err(PpmError::WrongChannelCount(usize::MAX)))
+        );
     }
 
     #[test]

@@ -27,7 +27,7 @@
 use super::cascade::{Cascade, CascadeConfig, Measured};
 use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError, ThermalLimits};
 use crate::can::{CanFrame, IdFilter};
-use crate::encoder::{Encoder, EncoderConfig, GearRatio, Origin};
+use crate::encoder::{DJI_COUNTS_PER_REV, Encoder, EncoderConfig, GearRatio, Origin};
 use crate::math::saturate;
 use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
 use crate::pid::{PidConfig, PidConfigError};
@@ -36,6 +36,9 @@ use core::cell::RefCell;
 use core::fmt;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+/// DJI ESCs send feedback every millisecond.
+const FEEDBACK_PERIOD_US: u64 = 1000;
 
 /// Which DJI motor and ESC, and for the GM6020 which command mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -103,6 +106,21 @@ impl DjiModel {
         }
     }
 
+    /// Torque per amp of torque current at the output shaft, in N·m/A (DJI user guides:
+    /// M3508 0.3, M2006 0.18, GM6020 0.741). The M3508's manual curve saturates near
+    /// 0.25 N·m/A effective (gear losses): torque targets are nominal, not measured.
+    pub const fn torque_constant_nm_per_amp(self) -> f32 {
+        match self {
+            Self::M3508 => 0.3,
+            Self::M2006 => 0.18,
+            Self::Gm6020Voltage | Self::Gm6020Current => 0.741,
+        }
+    }
+
+    /// Phase resistance in ohms (GM6020 user guide: 1.8 Ω), used to turn a feed-forward torque
+    /// into volts at standstill in voltage mode.
+    const GM6020_RESISTANCE_OHM: f32 = 1.8;
+
     /// Whether the ESC reports temperature in D6.
     pub const fn reports_temperature(self) -> bool {
         !matches!(self, Self::M2006)
@@ -133,10 +151,13 @@ pub struct DjiConfig {
     /// Offline timeout, multi-turn policy and thermal limits.
     pub health: HealthConfig,
     /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
-    /// firmware). Ignored by the other models. When raising it, raise the speed loop's
-    /// `output_limit` (volts, 30000 ↔ 24 V) too, or the loop never asks for more.
+    /// firmware); must be positive. Ignored by the other models. When raising it, raise the
+    /// speed loop's `output_limit` (volts, 30000 ↔ 24 V) too, or the loop never asks for more.
     pub voltage_raw_limit: i16,
-    /// Where the multi-turn angle starts (GM6020: absolute with its zero offset is typical).
+    /// Where the multi-turn angle starts. Default: power-on for the geared M3508 and M2006
+    /// (their rotor angle says nothing about the output's position), absolute with zero
+    /// offset 0 for the direct-drive GM6020, so a gimbal's zero does not move with power-on
+    /// (set `zero_offset_counts` to the raw count of your mechanism's zero).
     pub origin: Origin,
 }
 
@@ -192,7 +213,12 @@ impl DjiConfig {
             },
             health: HealthConfig::DEFAULT.with_thermal(thermal),
             voltage_raw_limit: 25000,
-            origin: Origin::PowerOn,
+            origin: match model {
+                DjiModel::M3508 | DjiModel::M2006 => Origin::PowerOn,
+                DjiModel::Gm6020Voltage | DjiModel::Gm6020Current => Origin::Absolute {
+                    zero_offset_counts: 0,
+                },
+            },
         }
     }
 }
@@ -214,6 +240,8 @@ pub enum DjiError {
     InvalidOrigin,
     /// Thermal limits that are not finite or where derating does not start below the cut-off.
     InvalidThermal,
+    /// A GM6020 voltage-mode raw limit that is not positive (it would silence the motor).
+    InvalidVoltageLimit,
 }
 
 impl fmt::Display for DjiError {
@@ -225,6 +253,7 @@ impl fmt::Display for DjiError {
             Self::InvalidThermal => {
                 f.write_str("DJI thermal limits not finite or derating not below cut-off")
             }
+            Self::InvalidVoltageLimit => f.write_str("GM6020 voltage raw limit not positive"),
         }
     }
 }
@@ -235,12 +264,19 @@ impl core::error::Error for DjiError {}
 struct DjiState {
     cascade: Cascade,
     encoder: Encoder,
+    rotor_rpm: i16,
     speed_rpm: f32,
-    current_amps: f32,
+    current_amps: Option<f32>,
     temperature_c: Option<f32>,
     liveness: Liveness,
     awaiting_return: bool,
     command: f32,
+    /// A user limit on the command (amps, or volts in voltage mode); infinity for none.
+    user_limit: f32,
+    /// Live-tuning and homing requests, applied by the next tick.
+    pending_speed: Option<PidConfig>,
+    pending_angle: Option<PidConfig>,
+    pending_home_deg: Option<f32>,
 }
 
 /// A DJI motor on a CAN bus: [`CanNode`] for the scheduler, [`Motor`] for the application.
@@ -277,6 +313,9 @@ impl DjiMotor {
         let Some(slot) = model.command_slot(esc_id) else {
             return Err(DjiError::IdOutOfRange { id: esc_id, max });
         };
+        if model.is_voltage_mode() && config.voltage_raw_limit <= 0 {
+            return Err(DjiError::InvalidVoltageLimit);
+        }
         if let Some(t) = config.health.thermal
             && !(t.derate_start_c.is_finite()
                 && t.cutoff_c.is_finite()
@@ -301,12 +340,17 @@ impl DjiMotor {
             state: Mutex::new(RefCell::new(DjiState {
                 cascade,
                 encoder,
+                rotor_rpm: 0,
                 speed_rpm: 0.0,
-                current_amps: 0.0,
+                current_amps: None,
                 temperature_c: None,
                 liveness: Liveness::NEW,
                 awaiting_return: false,
                 command: 0.0,
+                user_limit: f32::INFINITY,
+                pending_speed: None,
+                pending_angle: None,
+                pending_home_deg: None,
             })),
         })
     }
@@ -366,6 +410,70 @@ impl DjiMotor {
         self.state.lock(|s| s.borrow().cascade.speed_terms())
     }
 
+    /// Replaces the speed loop's gains and limits while running (live tuning), from the next
+    /// tick; the integral is kept. Its `output_limit` (amps, volts in voltage mode) is the
+    /// loop's own limit; the ESC's range and [`Motor::set_current_limit_amps`] still apply.
+    pub fn set_speed_pid(&self, config: PidConfig) -> Result<(), PidConfigError> {
+        config.validate()?;
+        self.state
+            .lock(|s| s.borrow_mut().pending_speed = Some(config));
+        Ok(())
+    }
+
+    /// Replaces the angle loop's gains (degrees in, rpm out) while running, from the next tick.
+    pub fn set_angle_pid(&self, config: PidConfig) -> Result<(), PidConfigError> {
+        config.validate()?;
+        self.state
+            .lock(|s| s.borrow_mut().pending_angle = Some(config));
+        Ok(())
+    }
+
+    /// Sets the feed-forward in the command unit (amps, or volts in voltage mode), added by the
+    /// speed loop in speed and angle modes. See also [`Motor::set_feed_forward_torque_nm`].
+    pub fn set_feed_forward(&self, command: f32) -> Result<(), TargetError> {
+        if !command.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.state
+            .lock(|s| s.borrow_mut().cascade.set_feed_forward(command));
+        Ok(())
+    }
+
+    /// Commands raw ESC counts, as DJI's examples do (GM6020 voltage mode: ±25000 by default;
+    /// C620: ±16384 ↔ ±20 A). Converted exactly to the command unit, so the same count goes
+    /// out on the wire (clamped to the range in force).
+    pub fn set_target_raw(&self, counts: i16) -> Result<(), TargetError> {
+        let (raw_fs, unit_fs) = self.model.raw_full_scale();
+        let value = f32::from(counts) * (unit_fs / raw_fs);
+        let mode = if self.model.is_voltage_mode() {
+            ControlMode::Voltage
+        } else {
+            ControlMode::Current
+        };
+        self.set(mode, value)
+    }
+
+    /// GM6020 voltage mode: limits the command to `volts` from the next tick (the raw limit
+    /// still applies on top). Other models: [`TargetError::Unsupported`] (use
+    /// [`Motor::set_current_limit_amps`]).
+    pub fn set_voltage_limit_volts(&self, volts: f32) -> Result<(), TargetError> {
+        if !self.model.is_voltage_mode() {
+            return Err(TargetError::Unsupported);
+        }
+        self.set_user_limit(volts)
+    }
+
+    fn set_user_limit(&self, limit: f32) -> Result<(), TargetError> {
+        if limit.is_nan() {
+            return Err(TargetError::NotFinite);
+        }
+        if limit < 0.0 {
+            return Err(TargetError::OutOfRange);
+        }
+        self.state.lock(|s| s.borrow_mut().user_limit = limit);
+        Ok(())
+    }
+
     /// The largest command this motor sends, in amps (volts in voltage mode): the ESC's range,
     /// or for the GM6020 in voltage mode the configured [`DjiConfig::voltage_raw_limit`].
     pub fn command_limit(&self) -> f32 {
@@ -407,26 +515,42 @@ impl DjiMotor {
         let raw_angle = u16::from_be_bytes([d[0], d[1]]);
         let rotor_rpm = i16::from_be_bytes([d[2], d[3]]);
         let raw_current = i16::from_be_bytes([d[4], d[5]]);
-        if raw_angle >= crate::encoder::DJI_COUNTS_PER_REV {
+        if raw_angle >= DJI_COUNTS_PER_REV {
             return Err(FrameError::OutOfRange);
         }
-        if s.awaiting_return {
+        let predicted_counts = if s.awaiting_return {
             if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
                 s.encoder.reset();
             }
             s.awaiting_return = false;
-        }
+            // Back from an outage: no trustworthy speed history; the return policy applies.
+            0.0
+        } else {
+            // Rotor counts turned since the previous frame: mean reported rotor speed times the
+            // time between the frames (at least one 1 kHz period: frames read back to back
+            // were still sent a period apart). Keeps multi-turn counting exact through lost
+            // frames at full speed (see `Encoder::update_predicted`).
+            let gap_us = match s.liveness.last_feedback() {
+                Some(prev) if now > prev => (now - prev).as_micros().max(FEEDBACK_PERIOD_US),
+                _ => FEEDBACK_PERIOD_US,
+            };
+            let mean_rotor_rpm = (f32::from(s.rotor_rpm) + f32::from(rotor_rpm)) * 0.5;
+            mean_rotor_rpm
+                * crate::time::micros_to_s(gap_us)
+                * (f32::from(DJI_COUNTS_PER_REV) / 60.0)
+        };
         s.encoder
-            .update(raw_angle)
+            .update_predicted(raw_angle, predicted_counts)
             .map_err(|_| FrameError::OutOfRange)?;
+        s.rotor_rpm = rotor_rpm;
         s.speed_rpm = f32::from(rotor_rpm) / self.model.gear().as_f32();
         let (raw_fs, unit_fs) = self.model.raw_full_scale();
-        s.current_amps = if self.model.is_voltage_mode() {
+        s.current_amps = Some(if self.model.is_voltage_mode() {
             // Voltage-mode GM6020 reports torque current on the current-mode scale.
             f32::from(raw_current) * (3.0 / 16384.0)
         } else {
             f32::from(raw_current) * (unit_fs / raw_fs)
-        };
+        });
         s.temperature_c = self.model.reports_temperature().then_some(f32::from(d[6]));
         s.liveness.record_feedback(now);
         Ok(())
@@ -435,14 +559,12 @@ impl DjiMotor {
 
 impl CanNode for DjiMotor {
     fn bus_usage(&self) -> BusUsage {
-        BusUsage {
-            listen: Some(IdFilter::standard(self.model.feedback_id(self.esc_id))),
-            feedback_hz: 1000,
-            feedback_extended: false,
-            command_slot: Some(self.slot),
-            command_frames_per_tick: 0,
-            command_extended: false,
-        }
+        BusUsage::NONE
+            .listening(
+                IdFilter::standard(self.model.feedback_id(self.esc_id)),
+                1000,
+            )
+            .with_slot(self.slot)
     }
 
     fn matches_frame(&self, frame: &CanFrame) -> bool {
@@ -458,6 +580,13 @@ impl CanNode for DjiMotor {
         let health = self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
+            // Requests recorded by the setters since the last tick (validated there).
+            if let Some(speed) = s.pending_speed.take() {
+                let _ = s.cascade.set_speed_config(speed);
+            }
+            if let Some(angle) = s.pending_angle.take() {
+                let _ = s.cascade.set_angle_config(angle);
+            }
             if s.liveness.check(&health, now) {
                 s.awaiting_return = true;
                 s.cascade.reset();
@@ -466,9 +595,21 @@ impl CanNode for DjiMotor {
                 s.command = 0.0;
                 return;
             }
+            if let Some(deg) = s.pending_home_deg.take()
+                && !s.encoder.set_total_angle_deg(deg)
+            {
+                s.pending_home_deg = Some(deg); // no reading yet: try again next tick
+            }
             let derate = match (health.thermal, s.temperature_c) {
                 (Some(limits), Some(t)) => limits.derating(t),
                 _ => 1.0,
+            };
+            // The limit in force: the ESC's range, derated, and the user's limit if lower.
+            let range = self.command_limit() * derate;
+            let limit = if s.user_limit < range {
+                s.user_limit
+            } else {
+                range
             };
             // Angles cost integer division; only the angle modes need them.
             let angles = matches!(
@@ -484,8 +625,8 @@ impl CanNode for DjiMotor {
                     0.0
                 },
             };
-            let out = s.cascade.step(&measured, dt_s);
-            s.command = saturate(out, self.command_limit() * derate);
+            let out = s.cascade.step(&measured, dt_s, limit);
+            s.command = saturate(out, limit);
         });
     }
 
@@ -522,6 +663,47 @@ impl Motor for DjiMotor {
         self.set(ControlMode::TotalAngle, angle_deg)
     }
 
+    /// Current-mode ESCs: amps = N·m / [`DjiModel::torque_constant_nm_per_amp`] (mode reads
+    /// [`ControlMode::Current`]). Voltage mode: [`TargetError::Unsupported`] (a voltage is
+    /// not a torque once the motor turns).
+    fn set_target_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        if !torque_nm.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.set_target_current(torque_nm / self.model.torque_constant_nm_per_amp())
+    }
+
+    /// Current-mode ESCs: through the torque constant, in amps. GM6020 in voltage mode: the
+    /// voltage that drives that torque's current through the 1.8 Ω winding at standstill
+    /// (`V = τ / kt · R`), right for holding a gimbal pitch against gravity.
+    fn set_feed_forward_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
+        let amps = torque_nm / self.model.torque_constant_nm_per_amp();
+        let command = if self.model.is_voltage_mode() {
+            amps * DjiModel::GM6020_RESISTANCE_OHM
+        } else {
+            amps
+        };
+        self.set_feed_forward(command)
+    }
+
+    /// Current-mode ESCs only (GM6020 in voltage mode:
+    /// [`set_voltage_limit_volts`](DjiMotor::set_voltage_limit_volts)).
+    fn set_current_limit_amps(&self, amps: f32) -> Result<(), TargetError> {
+        if self.model.is_voltage_mode() {
+            return Err(TargetError::Unsupported);
+        }
+        self.set_user_limit(amps)
+    }
+
+    fn set_total_angle_here_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
+        if !angle_deg.is_finite() {
+            return Err(TargetError::NotFinite);
+        }
+        self.state
+            .lock(|s| s.borrow_mut().pending_home_deg = Some(angle_deg));
+        Ok(())
+    }
+
     fn disable(&self) {
         let _ = self.set(ControlMode::Disabled, 0.0);
     }
@@ -534,9 +716,9 @@ impl Motor for DjiMotor {
                 mode: s.cascade.mode(),
                 target: s.cascade.target(),
                 speed_rpm: s.speed_rpm,
-                angle_deg: s.encoder.angle_deg(),
-                total_angle_deg: s.encoder.total_angle_deg(),
-                current_amps: Some(s.current_amps),
+                angle_deg: s.encoder.has_reading().then(|| s.encoder.angle_deg()),
+                total_angle_deg: s.encoder.has_reading().then(|| s.encoder.total_angle_deg()),
+                current_amps: s.current_amps,
                 temperature_c: s.temperature_c,
                 command: s.command,
                 offline_events: s.liveness.offline_events(),

@@ -234,8 +234,8 @@ fn m3508_feedback_parsed_to_output_shaft_units() {
     // 8191 → 100 is +101 rotor counts across the wrap.
     let expect_deg = 101.0 * 360.0 / 8192.0 / (3591.0 / 187.0);
     assert!(
-        (s.total_angle_deg - expect_deg).abs() < 1e-4,
-        "{}",
+        (s.total_angle_deg.unwrap() - expect_deg).abs() < 1e-4,
+        "{:?}",
         s.total_angle_deg
     );
 }
@@ -330,11 +330,11 @@ fn multi_turn_restart_policy_restarts_total_angle() {
     m.update_feedback(&fb(0x201, 0, 0, 0, 0), T0).unwrap();
     m.update_feedback(&fb(0x201, 4000, 0, 0, 0), T0).unwrap();
     tick(&m, T0);
-    assert!(m.total_angle_deg() > 0.0);
+    assert!(m.total_angle_deg().unwrap() > 0.0);
     tick(&m, T0 + Duration::from_millis(150)); // offline
     let back = T0 + Duration::from_millis(300);
     m.update_feedback(&fb(0x201, 7000, 0, 0, 0), back).unwrap();
-    assert_eq!(m.total_angle_deg(), 0.0);
+    assert_eq!(m.total_angle_deg(), Some(0.0));
 }
 
 #[test]
@@ -347,7 +347,7 @@ fn multi_turn_continue_policy_keeps_counting() {
     let back = T0 + Duration::from_millis(300);
     m.update_feedback(&fb(0x201, 4100, 0, 0, 0), back).unwrap();
     let expect = 4100.0 * 360.0 / 8192.0 / 36.0;
-    assert!((m.total_angle_deg() - expect).abs() < 1e-3);
+    assert!((m.total_angle_deg().unwrap() - expect).abs() < 1e-3);
 }
 
 #[test]
@@ -407,4 +407,297 @@ fn disable_sends_zero() {
     m.disable();
     assert_eq!(only_frame(&tick(&m, T0)).1, [0; 8]);
     assert_eq!(m.mode(), ControlMode::Disabled);
+}
+
+/// The slot value of a one-frame batch, in raw counts.
+fn slot0(b: &TxBatch) -> i16 {
+    let (_, d) = only_frame(b);
+    i16::from_be_bytes([d[0], d[1]])
+}
+
+#[test]
+fn current_then_speed_at_present_speed_does_not_run_away() {
+    // set_target_current(100) is clamped to 20 A. Then a speed target equal to the present
+    // speed: the loop takes over from the 20 A really sent, so once the motor is above the
+    // target the command falls at once instead of staying at 20 A.
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_current(100.0).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), 16384);
+    // Present speed 100 rpm at the output = 1920 rotor rpm.
+    m.update_feedback(&fb(0x201, 0, 1920, 0, 30), T0).unwrap();
+    m.set_target_rpm(100.0).unwrap();
+    // The motor accelerates past the target: 150 rpm (2880 rotor rpm).
+    m.update_feedback(&fb(0x201, 0, 2880, 0, 30), T0).unwrap();
+    let raw = slot0(&tick(&m, T0 + Duration::from_millis(1)));
+    // kp 0.6 A/rpm · -50 rpm = -30 A on top of 20 A: well below full scale (was 16384).
+    assert!(raw < 16384 / 2, "raw {raw}");
+}
+
+#[test]
+fn derating_is_the_limit_the_speed_loop_winds_against() {
+    // 110 °C: the limit is 10 A. A stalled motor far from its speed target must not wind its
+    // integral up to the loop's own 20 A, or the command jumps to 20 A when it cools.
+    let m = DjiMotor::m3508(1).unwrap();
+    m.update_feedback(&fb(0x201, 0, 0, 0, 110), T0).unwrap();
+    m.set_target_rpm(5.0).unwrap(); // small error: the integral does the work
+    for k in 0..3000 {
+        let b = tick(&m, T0 + Duration::from_millis(k / 2));
+        assert!(slot0(&b) <= 8192); // never above 10 A
+        m.update_feedback(&fb(0x201, 0, 0, 0, 110), T0 + Duration::from_millis(k / 2))
+            .unwrap();
+    }
+    assert!(m.speed_loop_terms().i <= 10.0 + 1e-4);
+    // Cooled down: the command continues from about 10 A instead of jumping to 20 A.
+    let now = T0 + Duration::from_millis(1600);
+    m.update_feedback(&fb(0x201, 0, 0, 0, 40), now).unwrap();
+    let raw = slot0(&tick(&m, now));
+    assert!(raw < 8192 + 400, "raw {raw} after cooling");
+}
+
+#[test]
+fn user_current_limit_caps_the_command_and_is_validated() {
+    let m = DjiMotor::m3508(2).unwrap();
+    online_id(&m, 0x202);
+    m.set_target_current(15.0).unwrap();
+    m.set_current_limit_amps(5.0).unwrap();
+    // 5 A = 4096 counts in slot 1 of 0x200.
+    let (_, d) = only_frame(&tick(&m, T0));
+    assert_eq!(i16::from_be_bytes([d[2], d[3]]), 4096);
+    assert_eq!(m.state().command, 5.0);
+    assert_eq!(m.set_current_limit_amps(-1.0), Err(TargetError::OutOfRange));
+    assert_eq!(
+        m.set_current_limit_amps(f32::NAN),
+        Err(TargetError::NotFinite)
+    );
+    m.set_current_limit_amps(f32::INFINITY).unwrap();
+    let (_, d) = only_frame(&tick(&m, T0));
+    assert_eq!(i16::from_be_bytes([d[2], d[3]]), 12288); // 15 A
+    let gm = DjiMotor::gm6020_voltage(1).unwrap();
+    assert_eq!(
+        gm.set_current_limit_amps(1.0),
+        Err(TargetError::Unsupported)
+    );
+}
+
+fn online_id(m: &DjiMotor, id: u16) {
+    m.update_feedback(&fb(id, 0, 0, 0, 30), T0).unwrap();
+}
+
+#[test]
+fn gm6020_voltage_limit_in_volts_and_raw_target() {
+    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    online_id(&m, 0x205);
+    // Raw 12345 counts go out as 12345 (exact round trip through volts).
+    m.set_target_raw(12345).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), 12345);
+    m.set_target_raw(-30000).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), -25000); // the default raw limit
+    // 6 V limit = 7500 counts at 30000 ↔ 24 V.
+    m.set_voltage_limit_volts(6.0).unwrap();
+    m.set_target_voltage(20.0).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), 7500);
+    assert_eq!(
+        DjiMotor::m3508(1).unwrap().set_voltage_limit_volts(6.0),
+        Err(TargetError::Unsupported)
+    );
+}
+
+#[test]
+fn non_positive_gm6020_voltage_limit_is_rejected() {
+    for limit in [0, -100] {
+        let mut cfg = DjiConfig::default_for(DjiModel::Gm6020Voltage);
+        cfg.voltage_raw_limit = limit;
+        assert_eq!(
+            DjiMotor::new(DjiModel::Gm6020Voltage, 1, cfg).unwrap_err(),
+            DjiError::InvalidVoltageLimit
+        );
+    }
+    // Irrelevant for the other models.
+    let mut cfg = DjiConfig::default_for(DjiModel::M3508);
+    cfg.voltage_raw_limit = 0;
+    assert!(DjiMotor::new(DjiModel::M3508, 1, cfg).is_ok());
+}
+
+#[test]
+fn gm6020_defaults_to_its_absolute_encoder_origin() {
+    // Raw 2048 is 90° from the default zero offset 0, at every power-on.
+    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    m.update_feedback(&fb(0x205, 2048, 0, 0, 30), T0).unwrap();
+    assert!((m.angle_deg().unwrap() - 90.0).abs() < 1e-4);
+    // A geared M3508 starts at 0 wherever its rotor is.
+    let w = DjiMotor::m3508(1).unwrap();
+    w.update_feedback(&fb(0x201, 2048, 0, 0, 30), T0).unwrap();
+    assert_eq!(w.total_angle_deg(), Some(0.0));
+}
+
+#[test]
+fn torque_target_goes_through_the_torque_constant() {
+    // M3508: 3 N·m / 0.3 N·m/A = 10 A = 8192 counts.
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_torque_nm(3.0).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), 8192);
+    assert_eq!(m.mode(), ControlMode::Current);
+    // GM6020 current mode: 0.741 N·m = 1 A = 16384 / 3 = 5461.3 → 5461.
+    let g = DjiMotor::gm6020_current(1).unwrap();
+    online_id(&g, 0x205);
+    g.set_target_torque_nm(0.741).unwrap();
+    assert_eq!(slot0(&tick(&g, T0)), 5461);
+    let v = DjiMotor::gm6020_voltage(1).unwrap();
+    assert_eq!(v.set_target_torque_nm(1.0), Err(TargetError::Unsupported));
+    assert_eq!(
+        m.set_target_torque_nm(f32::NAN),
+        Err(TargetError::NotFinite)
+    );
+}
+
+#[test]
+fn feed_forward_torque_holds_in_speed_mode() {
+    // A pitch arm needing 0.6 N·m: M2006 0.18 N·m/A → 3.333 A = 3333 counts at zero error.
+    let m = DjiMotor::m2006(1).unwrap();
+    online(&m);
+    m.set_feed_forward_torque_nm(0.6).unwrap();
+    m.set_target_rpm(0.0).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), 3333);
+    // GM6020 voltage mode: 0.741 N·m → 1 A through 1.8 Ω = 1.8 V = 2250 counts.
+    let g = DjiMotor::gm6020_voltage(1).unwrap();
+    online_id(&g, 0x205);
+    g.set_feed_forward_torque_nm(0.741).unwrap();
+    g.set_target_rpm(0.0).unwrap();
+    assert_eq!(slot0(&tick(&g, T0)), 2250);
+    // Not in open-loop modes.
+    m.set_target_current(1.0).unwrap();
+    assert_eq!(slot0(&tick(&m, T0)), 1000);
+}
+
+#[test]
+fn homing_through_the_trait_moves_the_total_angle_origin() {
+    let m = DjiMotor::m3508(1).unwrap();
+    m.update_feedback(&fb(0x201, 100, 0, 0, 30), T0).unwrap();
+    m.update_feedback(&fb(0x201, 3000, 0, 0, 30), T0).unwrap(); // +2900 counts ≈ 6.6°
+    assert!(m.total_angle_deg().unwrap() > 1.0);
+    m.set_total_angle_here_deg(-90.0).unwrap();
+    assert!(m.total_angle_deg().unwrap() > 1.0); // recorded, not applied yet
+    tick(&m, T0);
+    assert!((m.total_angle_deg().unwrap() + 90.0).abs() < 0.01);
+    // A total-angle target of -90° is now "here": next to no current asked (the homed
+    // position is rounded to a rotor count, 0.002° at the output).
+    m.set_target_total_angle_deg(-90.0).unwrap();
+    tick(&m, T0);
+    assert!(slot0(&tick(&m, T0)).abs() <= 5);
+    // Whereas 0° is now 90° away: the angle loop asks for speed.
+    // (the angle loop runs every 10th tick).
+    m.set_target_total_angle_deg(0.0).unwrap();
+    let most = (0..10).map(|_| slot0(&tick(&m, T0))).max().unwrap();
+    assert!(most > 1000, "{most}");
+    assert_eq!(
+        m.set_total_angle_here_deg(f32::INFINITY),
+        Err(TargetError::NotFinite)
+    );
+}
+
+#[test]
+fn live_speed_gains_apply_from_the_next_tick() {
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_rpm(10.0).unwrap();
+    // Default kp 0.6 A/rpm, ki 8: first tick 6 A + 0.08 A.
+    assert_eq!(slot0(&tick(&m, T0)), 4981); // 6.08 A · 819.2
+    m.set_speed_pid(PidConfig::new(0.2, 0.0, 0.0).with_output_limit(20.0))
+        .unwrap();
+    // kp 0.2: 2 A plus the 0.08 A integral kept = 2.08 A = 1704 counts.
+    assert_eq!(slot0(&tick(&m, T0)), 1704);
+    assert!(m.set_speed_pid(PidConfig::new(f32::NAN, 0.0, 0.0)).is_err());
+}
+
+#[test]
+fn m2006_at_full_speed_keeps_its_total_angle_through_lost_frames() {
+    // 18 000 rotor rpm (500 rpm at the output) = 2457.6 counts per ms. Frames arrive every
+    // ms except that 1, 2 or 3 in a row are lost now and then; the total angle must match
+    // the true rotation exactly (to the count).
+    let m = DjiMotor::m2006(1).unwrap();
+    let counts_per_ms = 18_000.0f64 / 60.0 * 8192.0 / 1000.0;
+    let mut t_ms = 0u64;
+    let mut sent = 0u32;
+    for k in 0..600u64 {
+        let lost = [0, 0, 1, 0, 2, 0, 0, 3][(k % 8) as usize];
+        t_ms += 1 + lost;
+        let true_counts = (counts_per_ms * t_ms as f64).round() as i64;
+        let raw = true_counts.rem_euclid(8192) as u16;
+        let now = T0 + Duration::from_millis(t_ms);
+        m.update_feedback(&fb(0x201, raw, 18_000, 0, 0), now)
+            .unwrap();
+        sent += 1;
+        if k == 0 {
+            continue;
+        }
+        let first = (counts_per_ms * 1.0).round() as i64; // power-on origin at t = 1 ms
+        let expect_deg = (true_counts - first) as f64 * 360.0 / 8192.0 / 36.0;
+        let got = f64::from(m.total_angle_deg().unwrap());
+        assert!(
+            (got - expect_deg).abs() < 0.05,
+            "frame {k}: {got} vs {expect_deg}"
+        );
+    }
+    assert_eq!(sent, 600);
+}
+
+#[test]
+fn m3508_at_full_speed_keeps_its_total_angle_through_lost_frames() {
+    // 9 256 rotor rpm backwards (C620 no-load 482 rpm at the output), 3 frames lost in a row.
+    let m = DjiMotor::m3508(1).unwrap();
+    let counts_per_ms = -9_256.0f64 / 60.0 * 8192.0 / 1000.0;
+    let mut t_ms = 0u64;
+    for _ in 0..300 {
+        t_ms += 4;
+        let true_counts = (counts_per_ms * t_ms as f64).round() as i64;
+        let now = T0 + Duration::from_millis(t_ms);
+        m.update_feedback(
+            &fb(0x201, true_counts.rem_euclid(8192) as u16, -9256, 0, 30),
+            now,
+        )
+        .unwrap();
+    }
+    let first = (counts_per_ms * 4.0).round() as i64;
+    let true_counts = (counts_per_ms * t_ms as f64).round() as i64;
+    let expect_deg = (true_counts - first) as f64 * 360.0 * 187.0 / (8192.0 * 3591.0);
+    let got = f64::from(m.total_angle_deg().unwrap());
+    assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
+}
+
+#[test]
+fn feedback_stamped_far_ahead_does_not_keep_the_motor_online() {
+    let m = DjiMotor::m3508(1).unwrap();
+    m.set_target_current(5.0).unwrap();
+    m.update_feedback(&fb(0x201, 0, 0, 0, 30), T0 + Duration::from_secs(3600))
+        .unwrap();
+    assert_ne!(slot0(&tick(&m, T0)), 0); // fresh now…
+    // …but nothing else arrives: offline and zero one timeout later.
+    assert_eq!(slot0(&tick(&m, T0 + Duration::from_millis(101))), 0);
+    assert!(!m.is_online());
+}
+
+#[test]
+fn state_reports_none_for_what_has_not_been_measured() {
+    let m = DjiMotor::m3508(1).unwrap();
+    let s = m.state();
+    assert_eq!(
+        (
+            s.angle_deg,
+            s.total_angle_deg,
+            s.current_amps,
+            s.temperature_c
+        ),
+        (None, None, None, None)
+    );
+    online(&m);
+    let s = m.state();
+    assert_eq!(s.angle_deg, Some(0.0));
+    assert_eq!(s.current_amps, Some(0.0));
+    assert_eq!(s.temperature_c, Some(30.0));
+    // The C610 never reports a temperature.
+    let w = DjiMotor::m2006(1).unwrap();
+    online(&w);
+    assert_eq!(w.state().temperature_c, None);
 }
