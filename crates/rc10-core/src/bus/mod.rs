@@ -1,14 +1,26 @@
 //! One CAN bus and the nodes on it: registration with checks ([`BusBuilder`]), the frozen
 //! [`Bus`] that the scheduler and receiver tasks share, and those two tasks' loops.
 //!
+//! # Registration
+//!
+//! Every node declares, in its [`BusUsage`](crate::node::BusUsage), every ID it listens on
+//! and every ID it transmits on (whole frames, or a slot in a shared DJI frame). Registration
+//! checks them all against each other, so no frame can be merged into another device's frame,
+//! no two senders share an ID and nothing is sent on an ID a device answers on. It also
+//! checks that one tick's command frames fit the transport's TX buffers
+//! ([`BusConfig::tx_depth`], 3 on an STM32G4): rather than refuse some node's frame every
+//! tick (it would time out, forever), a bus that cannot serve every node every tick is
+//! refused at setup, where the error can be read. Put the rest on another bus.
+//!
 //! # Tick order (RC10_LIB's `schedulerTask`, kept)
 //!
 //! Every period (1 ms by default): `update(now, dt)` on every node in registration order
 //! (control math only), then `pack_command` on every node (frame assembly only: DJI slots with
 //! the same command ID merge into one frame), then the frames are handed to the transport with
-//! `try_send`, in packing order. Frames the transport cannot queue (TX buffers full: 3 on an
-//! STM32G4; or bus-off) are counted in [`BusStats`], never waited for: the next tick sends
-//! fresh commands anyway.
+//! `try_send`, in packing order. Frames the transport cannot queue (TX buffers still full from
+//! an earlier tick, or bus-off) are counted in [`BusStats`], never waited for: the next tick
+//! sends fresh commands anyway. After a stall the missed ticks are skipped, not run back to
+//! back ([`TickPacer`]).
 //!
 //! # Receiving
 //!
@@ -21,7 +33,9 @@
 //!
 //! [`Bus::tick`], [`Bus::transmit`] and [`Bus::dispatch`] are plain functions that unit tests
 //! and the simulator call directly with virtual time. [`run_scheduler`] and [`run_receiver`]
-//! are thin async loops over them for Embassy tasks.
+//! are thin async loops over them for Embassy tasks; they are the only code in rc10-core that
+//! reads the embassy-time clock ([`run_scheduler_on`] takes the ticks from any
+//! [`TickSource`] instead).
 
 use crate::can::RawId;
 use crate::can::stats::RateWindow;

@@ -2,8 +2,13 @@
 //!
 //! They are deliberately small. Sending is non-blocking only ([`CanTransmit::try_send`]): the
 //! 1 kHz tick must never wait for the bus, so a full TX queue is reported and counted, not
-//! waited on. Receiving is async ([`CanReceive::receive`]) and carries the reception time, so
-//! feedback is stamped when it arrived, not when a task got round to it.
+//! waited on. Receiving is async ([`CanReceive::receive`]) and carries a timestamp: the
+//! reception time where the transport has one, else the time the driver read the frame
+//! (embassy-stm32 0.6 gives no usable hardware reception time, so rc10-stm32 stamps frames
+//! with embassy-time when it reads them from the RX FIFO: up to the receiver task's latency
+//! late). Consumers therefore treat timestamps with care: a stamp later than the tick's `now`
+//! is clamped to it, and lost-frame unwrapping takes at least one feedback period between
+//! frames read back to back.
 
 use super::CanFrame;
 use crate::time::Instant;
@@ -85,13 +90,15 @@ pub struct BusStatus {
 pub struct Received {
     /// The frame.
     pub frame: CanFrame,
-    /// Reception time (the peripheral's timestamp, or the time the driver saw it).
+    /// When the frame was received: the peripheral's reception time if the transport has
+    /// one, else when the driver read it (see the module docs).
     pub timestamp: Instant,
 }
 
 /// The sending half of a CAN transport.
 pub trait CanTransmit {
-    /// Queues `frame` for transmission without waiting.
+    /// Queues `frame` for transmission without waiting. `Ok` means *queued* in a TX buffer,
+    /// not sent: the frame still has to win arbitration and be acknowledged.
     fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError>;
 
     /// Current error state and counters. Transports that cannot tell report error-active.
@@ -104,6 +111,11 @@ pub trait CanTransmit {
 #[allow(async_fn_in_trait)] // Used through generics in Embassy tasks; no Send bound is wanted.
 pub trait CanReceive {
     /// Waits for the next frame, or reports why frames were lost.
+    ///
+    /// Errors are one-off events: after reporting one, the next call waits for the next
+    /// frame or the next *new* error. A transport that cannot promise this (it reports the
+    /// same condition again at once) is still safe with [`run_receiver`](crate::bus::run_receiver),
+    /// which backs off on repeated errors instead of spinning.
     async fn receive(&mut self) -> Result<Received, ReceiveError>;
 }
 

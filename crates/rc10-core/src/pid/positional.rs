@@ -36,7 +36,9 @@ pub struct PidConfig {
     /// Errors with `|error| ≤ deadband` count as zero for P and I (the I term holds, so a
     /// holding current is kept); D still damps. Outside the band the full error is used.
     pub deadband: f32,
-    /// Cutoff of a first-order low-pass on the D term in hertz; `0.0` for no filter.
+    /// Cutoff of a first-order low-pass on the D term in hertz; `0.0` for no filter. After a
+    /// reset the filter starts from zero, so the first derivative sample is smoothed like
+    /// the rest rather than passed through.
     pub d_cutoff_hz: f32,
     /// Linear or circular (angle) error.
     pub error_mode: ErrorMode,
