@@ -489,7 +489,8 @@ impl<'a, const N: usize> Bus<'a, N> {
     }
 
     /// Hands the batch's frames to `tx` in order with `try_send`, counting what was queued and
-    /// what was not.
+    /// what was not, and first the frames of earlier ticks still waiting
+    /// ([`CanTransmit::still_queued`], counted in `tx_stale`).
     ///
     /// Bus-off is tracked here and only here: the controller is taken to be bus-off during
     /// this tick if `status()` says so *or* any `try_send` reported it, and
@@ -497,6 +498,10 @@ impl<'a, const N: usize> Bus<'a, N> {
     /// whichever way the transport reports it. A tick with nothing to send and no bus-off
     /// status leaves the state as it was (there was nothing to learn it from).
     pub fn transmit(&self, batch: &TxBatch, tx: &mut impl CanTransmit) -> TransmitReport {
+        let stale = tx.still_queued();
+        if stale > 0 {
+            self.stats.record_tx_stale(u32::from(stale));
+        }
         let mut bus_off = tx.status().state == ErrorState::BusOff;
         let mut report = TransmitReport::default();
         for frame in batch.frames() {

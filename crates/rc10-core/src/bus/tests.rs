@@ -690,3 +690,24 @@ fn receive_backoff_waits_only_for_repeated_errors_and_resets_on_a_frame() {
     b.on_frame();
     assert_eq!(b.on_error(), None);
 }
+
+#[test]
+fn frames_left_over_from_the_previous_tick_are_counted_stale() {
+    let m = DjiMotor::m3508(1).unwrap();
+    let mut builder = BusBuilder::<1>::new();
+    builder.register(&m).unwrap();
+    let bus = builder.build();
+    let mut tx = TxQueue::<3>::new();
+    let mut batch = TxBatch::new();
+    bus.tick(T0, 0.001, &mut batch);
+    bus.transmit(&batch, &mut tx); // nobody takes it off the bus (no ACK)
+    bus.tick(T0, 0.001, &mut batch);
+    bus.transmit(&batch, &mut tx);
+    bus.tick(T0, 0.001, &mut batch);
+    bus.transmit(&batch, &mut tx);
+    // 0 waiting at tick 1, 1 at tick 2, 2 at tick 3.
+    assert_eq!(bus.stats().snapshot().tx_stale, 3);
+    while tx.pop().is_some() {}
+    bus.transmit(&batch, &mut tx);
+    assert_eq!(bus.stats().snapshot().tx_stale, 3);
+}

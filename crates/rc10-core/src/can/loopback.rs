@@ -66,4 +66,8 @@ impl<const DEPTH: usize> CanTransmit for TxQueue<DEPTH> {
     fn status(&self) -> BusStatus {
         self.status
     }
+
+    fn still_queued(&self) -> u8 {
+        u8::try_from(self.queue.len()).unwrap_or(u8::MAX)
+    }
 }

@@ -1,6 +1,7 @@
 //! The CAN layer: frames, ID filters, bit timing, transport traits and bus statistics.
 //! No hardware here: the STM32 adapter and the simulator implement the transport traits.
 
+pub mod acceptance;
 mod frame;
 pub mod loopback;
 pub mod stats;

@@ -22,6 +22,7 @@ pub struct BusStats {
     tx_frames: AtomicU32,
     tx_bits: AtomicU32,
     tx_full: AtomicU32,
+    tx_stale: AtomicU32,
     tx_bus_off: AtomicU32,
     tx_batch_overflow: AtomicU32,
     bus_off_events: AtomicU32,
@@ -52,6 +53,7 @@ impl BusStats {
             tx_frames: AtomicU32::new(0),
             tx_bits: AtomicU32::new(0),
             tx_full: AtomicU32::new(0),
+            tx_stale: AtomicU32::new(0),
             tx_bus_off: AtomicU32::new(0),
             tx_batch_overflow: AtomicU32::new(0),
             bus_off_events: AtomicU32::new(0),
@@ -83,6 +85,9 @@ impl BusStats {
     }
     pub(crate) fn record_tx_full(&self) {
         bump!(self.tx_full);
+    }
+    pub(crate) fn record_tx_stale(&self, n: u32) {
+        bump!(self.tx_stale, n);
     }
     pub(crate) fn record_tx_bus_off(&self) {
         bump!(self.tx_bus_off);
@@ -123,6 +128,7 @@ impl BusStats {
             tx_frames: l(&self.tx_frames),
             tx_bits: l(&self.tx_bits),
             tx_full: l(&self.tx_full),
+            tx_stale: l(&self.tx_stale),
             tx_bus_off: l(&self.tx_bus_off),
             tx_batch_overflow: l(&self.tx_batch_overflow),
             bus_off_events: l(&self.bus_off_events),
@@ -156,6 +162,9 @@ pub struct BusCounters {
     pub tx_bits: u32,
     /// Frames not queued because the TX buffers were full.
     pub tx_full: u32,
+    /// Frames found still waiting in the TX buffers at the start of a later tick (sent late;
+    /// see [`CanTransmit::still_queued`](super::CanTransmit::still_queued)).
+    pub tx_stale: u32,
     /// Frames not queued because the controller was bus-off.
     pub tx_bus_off: u32,
     /// Frames the devices tried to pack beyond the per-tick batch capacity.
@@ -188,6 +197,7 @@ impl BusCounters {
             tx_frames: self.tx_frames.wrapping_sub(earlier.tx_frames),
             tx_bits: self.tx_bits.wrapping_sub(earlier.tx_bits),
             tx_full: self.tx_full.wrapping_sub(earlier.tx_full),
+            tx_stale: self.tx_stale.wrapping_sub(earlier.tx_stale),
             tx_bus_off: self.tx_bus_off.wrapping_sub(earlier.tx_bus_off),
             tx_batch_overflow: self
                 .tx_batch_overflow

@@ -105,6 +105,15 @@ pub trait CanTransmit {
     fn status(&self) -> BusStatus {
         BusStatus::default()
     }
+
+    /// Frames queued on an earlier tick that are still waiting to go out, asked at the start
+    /// of each tick's transmit. Non-zero means the bus could not carry last tick's commands
+    /// within a period (congestion, or nobody acknowledging, so frames are retransmitted):
+    /// they go out late, and they hold TX buffers this tick's fresher commands need. Counted
+    /// in `tx_stale`. Transports that cannot tell report 0.
+    fn still_queued(&self) -> u8 {
+        0
+    }
 }
 
 /// The receiving half of a CAN transport.
@@ -126,6 +135,10 @@ impl<T: CanTransmit + ?Sized> CanTransmit for &mut T {
 
     fn status(&self) -> BusStatus {
         (**self).status()
+    }
+
+    fn still_queued(&self) -> u8 {
+        (**self).still_queued()
     }
 }
 
