@@ -218,7 +218,7 @@ impl CanTransmit for McuPort<'_> {
             BusStatus {
                 state: ErrorState::BusOff,
                 tx_error_count: 255,
-                rx_error_count: 0,
+                ..BusStatus::default()
             }
         } else {
             BusStatus::default()

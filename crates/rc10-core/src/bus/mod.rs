@@ -502,7 +502,11 @@ impl<'a, const N: usize> Bus<'a, N> {
         if stale > 0 {
             self.stats.record_tx_stale(u32::from(stale));
         }
-        let mut bus_off = tx.status().state == ErrorState::BusOff;
+        let status = tx.status();
+        if status.protocol_error {
+            self.stats.record_bus_error();
+        }
+        let mut bus_off = status.state == ErrorState::BusOff;
         let mut report = TransmitReport::default();
         for frame in batch.frames() {
             match tx.try_send(frame) {

@@ -246,6 +246,7 @@ fn bus_off_is_counted_once_per_entry_and_frames_not_queued() {
         state: ErrorState::BusOff,
         tx_error_count: 255,
         rx_error_count: 0,
+        protocol_error: true,
     });
     let mut batch = TxBatch::new();
     for _ in 0..3 {
@@ -254,6 +255,7 @@ fn bus_off_is_counted_once_per_entry_and_frames_not_queued() {
     }
     let c = bus.stats().snapshot();
     assert_eq!((c.bus_off_events, c.tx_bus_off, c.tx_frames), (1, 3, 0));
+    assert_eq!(c.bus_errors, 3); // the protocol error flag of each status read
     assert!(bus.stats().is_bus_off());
     tx.set_status(BusStatus::default());
     bus.transmit(&batch, &mut tx);

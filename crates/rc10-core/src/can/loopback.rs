@@ -30,6 +30,7 @@ impl<const DEPTH: usize> TxQueue<DEPTH> {
                 state: ErrorState::Active,
                 tx_error_count: 0,
                 rx_error_count: 0,
+                protocol_error: false,
             },
         }
     }

@@ -82,6 +82,11 @@ pub struct BusStatus {
     pub tx_error_count: u8,
     /// Receive error counter (0–127, 128 meaning "passive").
     pub rx_error_count: u8,
+    /// Whether the controller recorded a protocol error (stuff, form, ACK, bit, CRC) since
+    /// the last status read. Counted in `bus_errors` by the bus. Controllers whose error code
+    /// clears on read (FDCAN's PSR.LEC) report each error once, here or through
+    /// [`ReceiveError::BusError`], whichever reads it first.
+    pub protocol_error: bool,
 }
 
 /// A received frame and when it arrived.

@@ -321,3 +321,70 @@ mod tests {
         assert!((normalize(1024 + 346, 1024, 660, 0.05) - 0.5).abs() < 1e-3);
     }
 }
+
+/// A receiver shared between the task that feeds it bytes (UART DMA, an edge interrupt) and
+/// the tasks that read its signal, in a `static`. Each access holds a critical section for
+/// the few instructions of one call.
+///
+/// ```
+/// use rc10_core::remote::Shared;
+/// use rc10_core::remote::dbus::DbusReceiver;
+/// use rc10_core::time::{Duration, Instant};
+/// static DR16: Shared<DbusReceiver> = Shared::new(DbusReceiver::new(Duration::from_millis(100)));
+/// // UART task: DR16.push_bytes(&chunk, now). Control task:
+/// let sticks = DR16.with(|r| r.signal(Instant::from_millis(5)).value);
+/// assert_eq!(sticks.stick(0, 0.0), 0.0); // nothing received yet: neutral
+/// ```
+pub struct Shared<R> {
+    inner: embassy_sync::blocking_mutex::Mutex<
+        embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex,
+        core::cell::RefCell<R>,
+    >,
+    input_errors: core::sync::atomic::AtomicU32,
+}
+
+impl<R> Shared<R> {
+    /// Wraps `receiver`.
+    pub const fn new(receiver: R) -> Self {
+        Self {
+            inner: embassy_sync::blocking_mutex::Mutex::new(core::cell::RefCell::new(receiver)),
+            input_errors: core::sync::atomic::AtomicU32::new(0),
+        }
+    }
+
+    /// Runs `f` on the receiver under the lock.
+    pub fn with<T>(&self, f: impl FnOnce(&mut R) -> T) -> T {
+        self.inner.lock(|cell| f(&mut cell.borrow_mut()))
+    }
+
+    /// Counts an error of the input below the decoder (UART framing, parity or overrun
+    /// errors): the bytes were lost, the decoder resynchronises on its own.
+    pub fn record_input_error(&self) {
+        self.input_errors
+            .fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Input errors counted so far.
+    pub fn input_errors(&self) -> u32 {
+        self.input_errors.load(core::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+impl<F: ReceiverFrame, const N: usize> Shared<FrameReceiver<F, N>> {
+    /// Feeds bytes that arrived together at `now` (one DMA chunk).
+    pub fn push_bytes(&self, bytes: &[u8], now: Instant) {
+        self.with(|r| {
+            for b in bytes {
+                let _ = r.push_byte(*b, now);
+            }
+        });
+    }
+}
+
+impl<R> core::fmt::Debug for Shared<R> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Shared")
+            .field("input_errors", &self.input_errors())
+            .finish_non_exhaustive()
+    }
+}
