@@ -1,10 +1,83 @@
-//! The Embassy adapter of rc10 for STM32G4 boards.
+//! The Embassy adapter of rc10 for STM32G4 boards: FDCAN1..3 as rc10-core transports with
+//! hardware acceptance filters planned from the registered nodes, the scheduler and receiver
+//! tasks, DR16/SBUS/PPM inputs and VOFA+ telemetry over a UART.
 //!
-//! This crate is a skeleton: the FDCAN transport, the scheduler and receiver tasks and the
-//! input drivers arrive with the STM32 adapter work. It is built for `thumbv7em-none-eabihf`
-//! only (it is not a default workspace member, so host `cargo test` never builds it).
+//! Built for `thumbv7em-none-eabihf` only (it is not a default workspace member: host
+//! `cargo test` never builds it). Select your chip with a feature (`stm32g474re`, …). The
+//! firmware binary selects embassy-stm32's time driver (`time-driver-any`) and `memory-x`.
+//!
+//! # A board in a few lines
+//!
+//! ```ignore
+//! // Clocks: 170 MHz from HSI + PLL, FDCAN kernel clock from PCLK1.
+//! let p = embassy_stm32::init(rc10_stm32::clocks_170mhz());
+//! // Motors are statics; register them, freeze the bus, plan the filters from it.
+//! let mut builder = BusBuilder::with_config(BusConfig::DEFAULT.with_tx_depth(rc10_stm32::can::TX_BUFFERS));
+//! builder.register(&WHEEL_1)?;
+//! let bus: &'static G4Bus = BUS.init(builder.build());
+//! let plan = rc10_stm32::filter_plan(bus)?;
+//! let (tx, rx) = rc10_stm32::can::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs), Instance::Fdcan1, &plan, 1_000_000);
+//! spawner.spawn(scheduler_task(bus, tx)?);
+//! spawner.spawn(receiver_task(bus, rx)?);
+//! ```
+//!
+//! The firmware examples in `examples/stm32g474/` are complete, commented versions.
+//!
+//! # Priorities
+//!
+//! Run the scheduler and receiver tasks on an `InterruptExecutor` at a high interrupt
+//! priority, and application tasks (targets, remote handling, logging, telemetry) on the
+//! thread-mode executor. The control loop then preempts application code, never the other
+//! way round; motors, buses and receivers are shared through rc10-core's short critical
+//! sections, so no priority inversion lasts longer than one of them. Keep the FDCAN
+//! interrupts above the executor's, as embassy does by default (it only wakes tasks).
+//!
+//! # Coming from RC10_LIB and FreeRTOS
+//!
+//! | RC10_LIB / FreeRTOS | rc10 on Embassy |
+//! |---|---|
+//! | `fdCANbus::init`, RX ISR → queue → RX task | [`can::start`] (filters from the registered nodes), [`tasks::receiver_task`] |
+//! | 1 kHz `schedulerTask` with `vTaskDelayUntil` | [`tasks::scheduler_task`] (`Ticker`, missed ticks skipped) |
+//! | task priorities | `InterruptExecutor` priority for the control loop, thread mode for the rest |
+//! | `AirJoy` PPM on a timer | [`remote::ppm_task`] |
+//! | `debugTool` printf | `defmt` over RTT; VOFA+ with [`telemetry::run_vofa`] |
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod can;
+pub mod remote;
+pub mod tasks;
+pub mod telemetry;
+
 pub use rc10_core;
+
+use embassy_stm32::rcc;
+use rc10_core::can::acceptance::PlanError;
+
+/// embassy-stm32 configuration for an STM32G4 at 170 MHz from the internal 16 MHz HSI
+/// (PLL: /4 · 85 / 2), no external crystal needed, with the FDCAN kernel clock on PCLK1
+/// (170 MHz: 1 Mbit/s is 170 time quanta… divided by the prescaler embassy picks).
+pub fn clocks_170mhz() -> embassy_stm32::Config {
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hsi = true;
+    config.rcc.pll = Some(rcc::Pll {
+        source: rcc::PllSource::HSI,
+        prediv: rcc::PllPreDiv::DIV4,
+        mul: rcc::PllMul::MUL85,
+        divp: None,
+        divq: None,
+        divr: Some(rcc::PllRDiv::DIV2),
+    });
+    config.rcc.sys = rcc::Sysclk::PLL1_R;
+    config.rcc.boost = true; // 170 MHz needs the voltage-range 1 boost mode
+    config.rcc.mux.fdcansel = rcc::mux::Fdcansel::PCLK1;
+    config
+}
+
+/// The acceptance-filter plan for a frozen bus (what [`can::start`] programs).
+pub fn filter_plan<const N: usize>(
+    bus: &rc10_core::bus::Bus<'_, N>,
+) -> Result<can::G4FilterPlan, PlanError> {
+    can::G4FilterPlan::new(bus.nodes().iter().map(|node| node.bus_usage()))
+}

@@ -150,23 +150,15 @@ impl embedded_can::Frame for CanFrame {
 #[cfg(feature = "defmt")]
 impl defmt::Format for CanFrame {
     fn format(&self, f: defmt::Formatter) {
-        if self.is_extended() {
-            defmt::write!(
-                f,
-                "{=u32:#010x} [{}] {=[u8]:02x}",
-                self.raw_id(),
-                self.dlc,
-                self.data()
-            )
-        } else {
-            defmt::write!(
-                f,
-                "{=u32:#05x} [{}] {=[u8]:02x}",
-                self.raw_id(),
-                self.dlc,
-                self.data()
-            )
-        }
+        let kind = if self.is_extended() { "x" } else { "" };
+        defmt::write!(
+            f,
+            "{=u32:#x}{=str} [{}] {=[u8]:02x}",
+            self.raw_id(),
+            kind,
+            self.dlc,
+            self.data()
+        )
     }
 }
 

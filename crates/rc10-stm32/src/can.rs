@@ -1,0 +1,297 @@
+//! The FDCAN transport: rc10-core's [`CanTransmit`] and [`CanReceive`] over embassy-stm32's
+//! FDCAN driver, plus the start-up that programs the acceptance filters from the registered
+//! nodes.
+//!
+//! Choices, from reading embassy-stm32 0.6's `can/fdcan.rs` and `can/fd/peripheral.rs`:
+//!
+//! - **TX FIFO mode.** In the driver's default *priority* mode a full queue makes `write`
+//!   abort a pending frame, and a pending frame with the same ID is never replaced, so on a
+//!   loaded bus a stale command can still go out after a fresh one was refused. In FIFO mode
+//!   frames go out in the order the tick packed them, nothing is ever evicted, and a full
+//!   FIFO is reported (`SendError::Full`, counted in `tx_full`). Frames still waiting from
+//!   an earlier tick are counted at the start of each tick (`tx_stale`): they mean the bus
+//!   could not carry a period's commands (congestion, or no node acknowledging).
+//! - **Non-blocking send.** `CanTx::write` waits for a free buffer; [`FdcanTx::try_send`]
+//!   polls it once (`embassy_futures::poll_once`): queued, or `Full`.
+//! - **Timestamps.** The driver's `Envelope::ts` is derived from the FDCAN timestamp counter
+//!   at *read* time and can underflow right after boot; the timestamp counter is switched off
+//!   here and frames are stamped with embassy-time when the receiver reads them.
+//! - **Status in one place.** `PSR` clears its last-error code on read; only
+//!   [`FdcanTx::status`] reads it (once per tick), and reports bus-off, error-passive and a
+//!   protocol error seen since the last read. (The driver's own receive path also reads it
+//!   when its FIFOs are empty: an error is then reported by whichever reads first.)
+//! - **RX overrun.** The driver does not report lost messages. The receiver reads the
+//!   FIFOs' message-lost interrupt flags (`IR.RF0L`, `IR.RF1L`) through the register API and
+//!   clears them (write-1-to-clear, which touches no other flag), reporting
+//!   [`ReceiveError::Overrun`] once per occurrence.
+//! - **Bus-off** recovery is automatic (the driver restarts the controller from its
+//!   interrupt handler); each entry is counted once by the bus.
+
+use core::cell::Cell;
+use core::task::Poll;
+use embassy_futures::poll_once;
+use embassy_stm32::can::config::{GlobalFilter, TimestampSource, TxBufferMode};
+use embassy_stm32::can::filter::{
+    Action, EXTENDED_FILTER_MAX, ExtendedFilter, FilterType, STANDARD_FILTER_MAX, StandardFilter,
+};
+use embassy_stm32::can::{CanConfigurator, CanRx, CanTx, Frame};
+use embassy_stm32::pac;
+use embedded_can::Frame as _;
+use rc10_core::can::acceptance::{Fifo, FilterElement, FilterPlan};
+use rc10_core::can::{
+    BusStatus, CanFrame, CanReceive, CanTransmit, ErrorState, ExtendedId, ReceiveError, Received,
+    SendError, StandardId,
+};
+use rc10_core::time::Instant;
+
+/// Standard-ID filter elements of an STM32G4 FDCAN.
+pub const STANDARD_FILTERS: usize = STANDARD_FILTER_MAX as usize;
+/// Extended-ID filter elements of an STM32G4 FDCAN.
+pub const EXTENDED_FILTERS: usize = EXTENDED_FILTER_MAX as usize;
+/// TX buffers of an STM32G4 FDCAN (the bus's `tx_depth`).
+pub const TX_BUFFERS: u8 = 3;
+
+/// A filter plan sized for an STM32G4 FDCAN.
+pub type G4FilterPlan = FilterPlan<STANDARD_FILTERS, EXTENDED_FILTERS>;
+
+/// Which FDCAN peripheral (for the registers the driver does not expose).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Instance {
+    /// FDCAN1.
+    Fdcan1,
+    /// FDCAN2.
+    Fdcan2,
+    /// FDCAN3.
+    Fdcan3,
+}
+
+impl Instance {
+    fn regs(self) -> pac::can::Fdcan {
+        match self {
+            Self::Fdcan1 => pac::FDCAN1,
+            Self::Fdcan2 => pac::FDCAN2,
+            Self::Fdcan3 => pac::FDCAN3,
+        }
+    }
+}
+
+/// Configures a FDCAN for rc10 and starts it in normal mode: classic CAN at `bitrate_bps`,
+/// TX FIFO mode, automatic bus-off recovery, the timestamp counter off, the acceptance
+/// filters of `plan` (everything else rejected in hardware). Returns the two halves for the
+/// scheduler and receiver tasks.
+///
+/// The FDCAN kernel clock must be configured (`config.rcc.mux.fdcansel`, e.g. PCLK1) before
+/// `CanConfigurator::new`, which otherwise panics at run time (its default source is HSE).
+///
+/// # Panics
+///
+/// If no bit timing gives `bitrate_bps` from the FDCAN kernel clock (embassy-stm32's
+/// `set_bitrate`). 1 Mbit/s from a 170 MHz or 85 MHz clock works.
+pub fn start(
+    mut configurator: CanConfigurator<'static>,
+    instance: Instance,
+    plan: &G4FilterPlan,
+    bitrate_bps: u32,
+) -> (FdcanTx, FdcanRx) {
+    configurator.set_bitrate(bitrate_bps);
+    let config = configurator
+        .config()
+        .set_tx_buffer_mode(TxBufferMode::Fifo)
+        .set_timestamp_source(TimestampSource::None)
+        .set_automatic_bus_off_recovery(true)
+        .set_global_filter(GlobalFilter::reject_all());
+    configurator.set_config(config);
+    let mut standard = [StandardFilter::disable(); STANDARD_FILTERS];
+    for (slot, element) in standard.iter_mut().zip(plan.standard()) {
+        *slot = standard_filter(element);
+    }
+    let mut extended = [ExtendedFilter::disable(); EXTENDED_FILTERS];
+    for (slot, element) in extended.iter_mut().zip(plan.extended()) {
+        *slot = extended_filter(element);
+    }
+    configurator.properties().set_standard_filters(&standard);
+    configurator.properties().set_extended_filters(&extended);
+    let (tx, rx, _properties) = configurator.into_normal_mode().split();
+    let regs = instance.regs();
+    (
+        FdcanTx {
+            tx,
+            regs,
+            bus_off: Cell::new(false),
+        },
+        FdcanRx {
+            rx,
+            regs,
+            held: None,
+        },
+    )
+}
+
+fn action(fifo: Fifo) -> Action {
+    match fifo {
+        Fifo::Fifo0 => Action::StoreInFifo0,
+        Fifo::Fifo1 => Action::StoreInFifo1,
+    }
+}
+
+/// The planned element as an FDCAN standard filter (a disabled one if the plan's IDs do not
+/// fit 11 bits, which the plan never produces).
+fn standard_filter(element: &FilterElement) -> StandardFilter {
+    let std = |id: u32| u16::try_from(id).ok().and_then(StandardId::new);
+    let filter = match *element {
+        FilterElement::Dual { ids: [a, b], .. } => match (std(a), std(b)) {
+            (Some(a), Some(b)) => FilterType::DedicatedDual(a, b),
+            _ => FilterType::Disabled,
+        },
+        FilterElement::Mask { id, mask, .. } => match (u16::try_from(id), u16::try_from(mask)) {
+            (Ok(filter), Ok(mask)) => FilterType::BitMask { filter, mask },
+            _ => FilterType::Disabled,
+        },
+    };
+    StandardFilter {
+        filter,
+        action: action(element.fifo()),
+    }
+}
+
+/// The planned element as an FDCAN extended filter.
+fn extended_filter(element: &FilterElement) -> ExtendedFilter {
+    let filter = match *element {
+        FilterElement::Dual { ids: [a, b], .. } => match (ExtendedId::new(a), ExtendedId::new(b)) {
+            (Some(a), Some(b)) => FilterType::DedicatedDual(a, b),
+            _ => FilterType::Disabled,
+        },
+        FilterElement::Mask { id, mask, .. } => FilterType::BitMask { filter: id, mask },
+    };
+    ExtendedFilter {
+        filter,
+        action: action(element.fifo()),
+    }
+}
+
+/// The sending half, for the scheduler task.
+pub struct FdcanTx {
+    tx: CanTx<'static>,
+    regs: pac::can::Fdcan,
+    /// Bus-off as of the last `status()` (which the bus reads at the start of each tick's
+    /// transmit): while off the bus, frames are refused rather than left to go out stale
+    /// after recovery.
+    bus_off: Cell<bool>,
+}
+
+impl CanTransmit for FdcanTx {
+    fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
+        if self.bus_off.get() {
+            return Err(SendError::BusOff);
+        }
+        let Some(out) = to_hal(frame) else {
+            return Err(SendError::Full); // unreachable: every CanFrame is a classic frame
+        };
+        match poll_once(self.tx.write(&out)) {
+            // In FIFO mode the driver never evicts a pending frame, so `Some` cannot occur.
+            Poll::Ready(_) => Ok(()),
+            Poll::Pending => Err(SendError::Full),
+        }
+    }
+
+    fn status(&self) -> BusStatus {
+        // The one read of PSR (it clears LEC): mode and last error together.
+        let psr = self.regs.psr().read();
+        let ecr = self.regs.ecr().read();
+        let state = if psr.bo() {
+            ErrorState::BusOff
+        } else if psr.ep() {
+            ErrorState::Passive
+        } else {
+            ErrorState::Active
+        };
+        self.bus_off.set(psr.bo());
+        // LEC 0 = no error, 7 = no change since the last read; 1–6 are protocol errors.
+        let lec = psr.lec().to_bits();
+        BusStatus {
+            state,
+            tx_error_count: ecr.tec(),
+            rx_error_count: ecr.rec(),
+            protocol_error: (1..=6).contains(&lec),
+        }
+    }
+
+    fn still_queued(&self) -> u8 {
+        let pending = self.regs.txbrp().read();
+        (0..usize::from(TX_BUFFERS))
+            .map(|i| u8::from(pending.trp(i)))
+            .sum()
+    }
+}
+
+/// The receiving half, for the receiver task.
+pub struct FdcanRx {
+    rx: CanRx<'static>,
+    regs: pac::can::Fdcan,
+    /// A frame read together with a message-lost flag: the overrun is reported first.
+    held: Option<Received>,
+}
+
+impl FdcanRx {
+    /// Whether a FIFO lost a message since the last check; clears the flags it saw.
+    fn take_message_lost(&mut self) -> bool {
+        let ir = self.regs.ir().read();
+        let lost = [ir.rfl(0), ir.rfl(1)];
+        if lost.contains(&true) {
+            // Write-1-to-clear: only these two flags change.
+            self.regs.ir().write(|w| {
+                w.set_rfl(0, lost[0]);
+                w.set_rfl(1, lost[1]);
+            });
+            true
+        } else {
+            false
+        }
+    }
+}
+
+impl CanReceive for FdcanRx {
+    async fn receive(&mut self) -> Result<Received, ReceiveError> {
+        if let Some(received) = self.held.take() {
+            return Ok(received);
+        }
+        if self.take_message_lost() {
+            return Err(ReceiveError::Overrun);
+        }
+        match self.rx.read().await {
+            Ok(envelope) => {
+                let timestamp = Instant::now();
+                let Some(frame) = from_hal(&envelope.frame) else {
+                    return Err(ReceiveError::BusError); // unreachable for classic frames
+                };
+                let received = Received { frame, timestamp };
+                if self.take_message_lost() {
+                    self.held = Some(received);
+                    return Err(ReceiveError::Overrun);
+                }
+                Ok(received)
+            }
+            // A protocol error the driver read from PSR.LEC (bus-off is seen by `status`).
+            Err(_protocol_error) => Err(ReceiveError::BusError),
+        }
+    }
+}
+
+/// rc10-core's frame as embassy-stm32's.
+pub fn to_hal(frame: &CanFrame) -> Option<Frame> {
+    if frame.is_remote() {
+        Frame::new_remote(frame.id(), frame.dlc()).ok()
+    } else {
+        Frame::new_data(frame.id(), frame.data()).ok()
+    }
+}
+
+/// embassy-stm32's frame as rc10-core's.
+pub fn from_hal(frame: &Frame) -> Option<CanFrame> {
+    if frame.is_remote_frame() {
+        CanFrame::remote(*frame.id(), frame.dlc())
+    } else {
+        CanFrame::new(*frame.id(), frame.data())
+    }
+}

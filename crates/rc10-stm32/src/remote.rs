@@ -1,0 +1,116 @@
+//! Remote-control inputs on a board: DR16 DBUS and SBUS from a UART with DMA, PPM (RC10's
+//! AirJoy) from edge interrupts. Each feeds one of rc10-core's decoders, kept in a
+//! [`Shared`] that control tasks read with its failsafe signal.
+
+use embassy_stm32::exti::ExtiInput;
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{self, DataBits, Parity, RingBufferedUartRx, StopBits};
+use rc10_core::remote::Shared;
+use rc10_core::remote::dbus::DbusReceiver;
+use rc10_core::remote::ppm::PpmReceiver;
+use rc10_core::remote::sbus::SbusReceiver;
+use rc10_core::time::Instant;
+
+/// UART settings of a DJI DR16 receiver's DBUS output: 100 kbaud, 8 data bits, even parity,
+/// one stop bit. The line is inverted; set `inverted` unless your board has a hardware
+/// inverter in front of the pin (RoboMaster development boards do).
+pub fn dbus_config(inverted: bool) -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = 100_000;
+    config.data_bits = DataBits::DataBits8;
+    config.parity = Parity::ParityEven;
+    config.stop_bits = StopBits::STOP1;
+    config.invert_rx = inverted;
+    config
+}
+
+/// UART settings of SBUS: 100 kbaud, 8 data bits, even parity, two stop bits, inverted line
+/// (`inverted` as for [`dbus_config`]).
+pub fn sbus_config(inverted: bool) -> usart::Config {
+    let mut config = dbus_config(inverted);
+    config.stop_bits = StopBits::STOP2;
+    config
+}
+
+/// Reads a byte stream from a DMA ring-buffered UART into `receiver` until the end of time.
+/// Every chunk (the DMA reports on line idle, so a chunk is about one frame) is stamped with
+/// the time it was read; UART errors (framing, parity, overrun) are counted in
+/// [`Shared::input_errors`] and the decoder resynchronises on the next frame gap.
+pub async fn run_uart_receiver<R>(mut rx: RingBufferedUartRx<'static>, receiver: &Shared<R>) -> !
+where
+    Shared<R>: PushBytes,
+{
+    let mut chunk = [0u8; 64];
+    loop {
+        match rx.read(&mut chunk).await {
+            Ok(n) => receiver.push(chunk.get(..n).unwrap_or(&[]), Instant::now()),
+            Err(_) => receiver.count_error(),
+        }
+    }
+}
+
+/// Receivers that take bytes (implemented for the DBUS and SBUS receivers).
+pub trait PushBytes {
+    /// Feeds bytes received at `now`.
+    fn push(&self, bytes: &[u8], now: Instant);
+    /// Counts an input error.
+    fn count_error(&self);
+}
+
+impl PushBytes for Shared<DbusReceiver> {
+    fn push(&self, bytes: &[u8], now: Instant) {
+        self.push_bytes(bytes, now);
+    }
+    fn count_error(&self) {
+        self.record_input_error();
+    }
+}
+
+impl PushBytes for Shared<SbusReceiver> {
+    fn push(&self, bytes: &[u8], now: Instant) {
+        self.push_bytes(bytes, now);
+    }
+    fn count_error(&self) {
+        self.record_input_error();
+    }
+}
+
+/// The DR16 task: one per board. See [`run_uart_receiver`].
+#[embassy_executor::task]
+pub async fn dbus_task(
+    rx: RingBufferedUartRx<'static>,
+    receiver: &'static Shared<DbusReceiver>,
+) -> ! {
+    run_uart_receiver(rx, receiver).await
+}
+
+/// The SBUS task: one per board. See [`run_uart_receiver`].
+#[embassy_executor::task]
+pub async fn sbus_task(
+    rx: RingBufferedUartRx<'static>,
+    receiver: &'static Shared<SbusReceiver>,
+) -> ! {
+    run_uart_receiver(rx, receiver).await
+}
+
+/// PPM (8 channels, RC10_LIB's AirJoy): times the rising edges of the PPM line and feeds the
+/// intervals in µs to the decoder. Edge times come from embassy-time in the EXTI wake-up, so
+/// interrupt latency adds a few µs of jitter (a 500 µs stick range makes that < 1 %).
+#[embassy_executor::task]
+pub async fn ppm_task(
+    mut pin: ExtiInput<'static, Async>,
+    receiver: &'static Shared<PpmReceiver<8>>,
+) -> ! {
+    let mut last: Option<Instant> = None;
+    loop {
+        pin.wait_for_rising_edge().await;
+        let now = Instant::now();
+        if let Some(prev) = last {
+            let interval_us = u32::try_from((now - prev).as_micros()).unwrap_or(u32::MAX);
+            receiver.with(|r| {
+                let _ = r.push_interval(interval_us, now);
+            });
+        }
+        last = Some(now);
+    }
+}
