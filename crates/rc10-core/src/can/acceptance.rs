@@ -215,9 +215,15 @@ impl<const S: usize, const E: usize> FilterPlan<S, E> {
             *n += 1;
         }
         let pushed = if filter.extended {
-            self.extended.push(element).is_ok().then(|| self.extended.len() - 1)
+            self.extended
+                .push(element)
+                .is_ok()
+                .then(|| self.extended.len() - 1)
         } else {
-            self.standard.push(element).is_ok().then(|| self.standard.len() - 1)
+            self.standard
+                .push(element)
+                .is_ok()
+                .then(|| self.standard.len() - 1)
         };
         if exact
             && let Some(at) = pushed

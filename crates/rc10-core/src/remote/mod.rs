@@ -366,7 +366,8 @@ impl<R> Shared<R> {
 
     /// Input errors counted so far.
     pub fn input_errors(&self) -> u32 {
-        self.input_errors.load(core::sync::atomic::Ordering::Relaxed)
+        self.input_errors
+            .load(core::sync::atomic::Ordering::Relaxed)
     }
 }
 
