@@ -271,57 +271,6 @@ pub fn normalize(raw: u16, center: u16, half_range: u16, deadband: f32) -> f32 {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn failsafe_goes_neutral_immediately_and_frames_recover() {
-        let mut link = Link::new(0i32, Duration::from_millis(100));
-        link.accept(5, Instant::from_millis(0));
-        link.failsafe(Instant::from_millis(1));
-        assert_eq!(
-            link.signal(Instant::from_millis(2)),
-            Signal {
-                value: 0,
-                lost: true
-            }
-        );
-        link.accept(7, Instant::from_millis(3));
-        assert_eq!(link.signal(Instant::from_millis(4)).value, 7);
-    }
-
-    #[test]
-    fn gap_framer_cuts_on_silence_and_completes_on_length() {
-        let mut f = GapFramer::<3>::new(Duration::from_millis(1));
-        let at = Instant::from_micros;
-        assert_eq!(f.push(1, at(0)), Framed::Pending);
-        assert_eq!(f.push(2, at(100)), Framed::Pending);
-        // 2 ms of silence: the two bytes were a cut-short frame; 9 starts a new one.
-        assert_eq!(f.push(9, at(2100)), Framed::Truncated);
-        assert_eq!(f.push(8, at(2200)), Framed::Pending);
-        assert_eq!(f.push(7, at(2300)), Framed::Frame([9, 8, 7]));
-        assert_eq!(f.push(6, at(2400)), Framed::Pending);
-    }
-
-    #[test]
-    fn never_received_is_lost() {
-        let link = Link::new(0u8, Duration::from_millis(100));
-        assert!(link.signal(Instant::from_millis(0)).lost);
-    }
-
-    #[test]
-    fn normalize_centre_ends_and_deadband() {
-        assert_eq!(normalize(1024, 1024, 660, 0.0), 0.0);
-        assert_eq!(normalize(1684, 1024, 660, 0.0), 1.0);
-        assert_eq!(normalize(364, 1024, 660, 0.0), -1.0);
-        assert_eq!(normalize(2000, 1024, 660, 0.0), 1.0); // clamped
-        assert_eq!(normalize(1030, 1024, 660, 0.05), 0.0); // 0.009 inside the band
-        // Halfway between band edge (0.05) and 1: (0.525 − 0.05) / 0.95 = 0.5.
-        assert!((normalize(1024 + 346, 1024, 660, 0.05) - 0.5).abs() < 1e-3);
-    }
-}
-
 /// A receiver shared between the task that feeds it bytes (UART DMA, an edge interrupt) and
 /// the tasks that read its signal, in a `static`. Each access holds a critical section for
 /// the few instructions of one call.
@@ -387,5 +336,56 @@ impl<R> core::fmt::Debug for Shared<R> {
         f.debug_struct("Shared")
             .field("input_errors", &self.input_errors())
             .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failsafe_goes_neutral_immediately_and_frames_recover() {
+        let mut link = Link::new(0i32, Duration::from_millis(100));
+        link.accept(5, Instant::from_millis(0));
+        link.failsafe(Instant::from_millis(1));
+        assert_eq!(
+            link.signal(Instant::from_millis(2)),
+            Signal {
+                value: 0,
+                lost: true
+            }
+        );
+        link.accept(7, Instant::from_millis(3));
+        assert_eq!(link.signal(Instant::from_millis(4)).value, 7);
+    }
+
+    #[test]
+    fn gap_framer_cuts_on_silence_and_completes_on_length() {
+        let mut f = GapFramer::<3>::new(Duration::from_millis(1));
+        let at = Instant::from_micros;
+        assert_eq!(f.push(1, at(0)), Framed::Pending);
+        assert_eq!(f.push(2, at(100)), Framed::Pending);
+        // 2 ms of silence: the two bytes were a cut-short frame; 9 starts a new one.
+        assert_eq!(f.push(9, at(2100)), Framed::Truncated);
+        assert_eq!(f.push(8, at(2200)), Framed::Pending);
+        assert_eq!(f.push(7, at(2300)), Framed::Frame([9, 8, 7]));
+        assert_eq!(f.push(6, at(2400)), Framed::Pending);
+    }
+
+    #[test]
+    fn never_received_is_lost() {
+        let link = Link::new(0u8, Duration::from_millis(100));
+        assert!(link.signal(Instant::from_millis(0)).lost);
+    }
+
+    #[test]
+    fn normalize_centre_ends_and_deadband() {
+        assert_eq!(normalize(1024, 1024, 660, 0.0), 0.0);
+        assert_eq!(normalize(1684, 1024, 660, 0.0), 1.0);
+        assert_eq!(normalize(364, 1024, 660, 0.0), -1.0);
+        assert_eq!(normalize(2000, 1024, 660, 0.0), 1.0); // clamped
+        assert_eq!(normalize(1030, 1024, 660, 0.05), 0.0); // 0.009 inside the band
+        // Halfway between band edge (0.05) and 1: (0.525 − 0.05) / 0.95 = 0.5.
+        assert!((normalize(1024 + 346, 1024, 660, 0.05) - 0.5).abs() < 1e-3);
     }
 }
