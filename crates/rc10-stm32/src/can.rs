@@ -27,6 +27,7 @@
 //! - **Bus-off** recovery is automatic (the driver restarts the controller from its
 //!   interrupt handler); each entry is counted once by the bus.
 
+use crate::status;
 use core::cell::Cell;
 use core::task::Poll;
 use embassy_futures::poll_once;
@@ -39,8 +40,8 @@ use embassy_stm32::pac;
 use embedded_can::Frame as _;
 use rc10_core::can::acceptance::{Fifo, FilterElement, FilterPlan};
 use rc10_core::can::{
-    BusStatus, CanFrame, CanReceive, CanTransmit, ErrorState, ExtendedId, ReceiveError, Received,
-    SendError, StandardId,
+    BusStatus, CanFrame, CanReceive, CanTransmit, ExtendedId, ReceiveError, Received, SendError,
+    StandardId,
 };
 use rc10_core::time::Instant;
 
@@ -199,29 +200,19 @@ impl CanTransmit for FdcanTx {
         // The one read of PSR (it clears LEC): mode and last error together.
         let psr = self.regs.psr().read();
         let ecr = self.regs.ecr().read();
-        let state = if psr.bo() {
-            ErrorState::BusOff
-        } else if psr.ep() {
-            ErrorState::Passive
-        } else {
-            ErrorState::Active
-        };
         self.bus_off.set(psr.bo());
-        // LEC 0 = no error, 7 = no change since the last read; 1–6 are protocol errors.
-        let lec = psr.lec().to_bits();
-        BusStatus {
-            state,
-            tx_error_count: ecr.tec(),
-            rx_error_count: ecr.rec(),
-            protocol_error: (1..=6).contains(&lec),
-        }
+        status::bus_status(
+            psr.bo(),
+            psr.ep(),
+            psr.lec().to_bits(),
+            ecr.tec(),
+            ecr.rec(),
+        )
     }
 
     fn still_queued(&self) -> u8 {
         let pending = self.regs.txbrp().read();
-        (0..usize::from(TX_BUFFERS))
-            .map(|i| u8::from(pending.trp(i)))
-            .sum()
+        status::pending_frames([pending.trp(0), pending.trp(1), pending.trp(2)])
     }
 }
 
@@ -237,16 +228,16 @@ impl FdcanRx {
     /// Whether a FIFO lost a message since the last check; clears the flags it saw.
     fn take_message_lost(&mut self) -> bool {
         let ir = self.regs.ir().read();
-        let lost = [ir.rfl(0), ir.rfl(1)];
-        if lost.contains(&true) {
-            // Write-1-to-clear: only these two flags change.
-            self.regs.ir().write(|w| {
-                w.set_rfl(0, lost[0]);
-                w.set_rfl(1, lost[1]);
-            });
-            true
-        } else {
-            false
+        match status::message_lost(ir.rfl(0), ir.rfl(1)) {
+            Some(lost) => {
+                // Write-1-to-clear: only these two flags change.
+                self.regs.ir().write(|w| {
+                    w.set_rfl(0, lost[0]);
+                    w.set_rfl(1, lost[1]);
+                });
+                true
+            }
+            None => false,
         }
     }
 }

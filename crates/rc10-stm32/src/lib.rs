@@ -47,6 +47,7 @@
 
 pub mod can;
 pub mod remote;
+pub mod status;
 pub mod tasks;
 pub mod telemetry;
 

@@ -1,0 +1,37 @@
+//! Register values to rc10-core's transport types: pure functions of the bits the FDCAN
+//! reports, kept free of embassy-stm32 so the host tests cover them (the `tests/` crate
+//! includes this file).
+
+use rc10_core::can::{BusStatus, ErrorState};
+
+/// The status the transport reports, from PSR's bus-off (`BO`) and error-passive (`EP`)
+/// flags, its last-error code (`LEC`) and ECR's counters.
+///
+/// `LEC` values 1–6 are protocol errors (stuff, form, ACK, bit 1, bit 0, CRC); 0 is "no
+/// error" and 7 "no change since the last read" (the register clears it on read).
+pub fn bus_status(bus_off: bool, error_passive: bool, lec: u8, tec: u8, rec: u8) -> BusStatus {
+    let state = if bus_off {
+        ErrorState::BusOff
+    } else if error_passive {
+        ErrorState::Passive
+    } else {
+        ErrorState::Active
+    };
+    BusStatus {
+        state,
+        tx_error_count: tec,
+        rx_error_count: rec,
+        protocol_error: (1..=6).contains(&lec),
+    }
+}
+
+/// Frames waiting in the TX buffers, from TXBRP's transmission-request-pending bits.
+pub fn pending_frames(request_pending: [bool; 3]) -> u8 {
+    request_pending.iter().map(|p| u8::from(*p)).sum()
+}
+
+/// Which RX FIFO message-lost flags (`IR.RF0L`, `IR.RF1L`) to clear, and whether any message
+/// was lost.
+pub fn message_lost(rf0l: bool, rf1l: bool) -> Option<[bool; 2]> {
+    (rf0l || rf1l).then_some([rf0l, rf1l])
+}

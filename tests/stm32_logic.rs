@@ -1,0 +1,106 @@
+//! The board-independent logic of rc10-stm32, on the host: the register-to-status mapping
+//! (included from the adapter's source, which has no embassy-stm32 dependency) and the
+//! acceptance-filter plans the adapter programs for the example robots.
+
+// Test code: a failed setup or assertion should stop the test.
+#![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+#[path = "../crates/rc10-stm32/src/status.rs"]
+mod status;
+
+use rc10_core::can::ErrorState;
+use rc10_core::can::acceptance::{Fifo, FilterPlan};
+use rc10_core::motor::dji::DjiMotor;
+use rc10_core::motor::dm::{DmConfig, DmMotor};
+use rc10_core::motor::vesc::{VescConfig, VescMotor, VescStatusSet};
+use rc10_core::node::CanNode;
+
+#[test]
+fn psr_flags_map_to_the_fault_confinement_state() {
+    assert_eq!(
+        status::bus_status(false, false, 0, 0, 0).state,
+        ErrorState::Active
+    );
+    assert_eq!(
+        status::bus_status(false, true, 0, 130, 0).state,
+        ErrorState::Passive
+    );
+    // Bus-off wins over error-passive (both flags are set while off the bus).
+    let off = status::bus_status(true, true, 3, 255, 12);
+    assert_eq!(off.state, ErrorState::BusOff);
+    assert_eq!((off.tx_error_count, off.rx_error_count), (255, 12));
+}
+
+#[test]
+fn last_error_codes_1_to_6_are_protocol_errors_0_and_7_are_not() {
+    for lec in 0..=7u8 {
+        let expected = (1..=6).contains(&lec);
+        assert_eq!(
+            status::bus_status(false, false, lec, 0, 0).protocol_error,
+            expected,
+            "LEC {lec}"
+        );
+    }
+}
+
+#[test]
+fn pending_tx_buffers_are_counted() {
+    assert_eq!(status::pending_frames([false; 3]), 0);
+    assert_eq!(status::pending_frames([true, false, true]), 2);
+    assert_eq!(status::pending_frames([true; 3]), 3);
+}
+
+#[test]
+fn message_lost_flags_are_cleared_only_where_set() {
+    assert_eq!(status::message_lost(false, false), None);
+    assert_eq!(status::message_lost(true, false), Some([true, false]));
+    assert_eq!(status::message_lost(false, true), Some([false, true]));
+}
+
+type G4Plan = FilterPlan<28, 8>;
+
+#[test]
+fn three_buses_example_plans_fit_and_accept_exactly_the_feedback() {
+    // FDCAN1: four M3508; FDCAN2: two GM6020; FDCAN3: two M2006 (examples/stm32g474).
+    let wheels: Vec<DjiMotor> = (1..=4).map(|i| DjiMotor::m3508(i).unwrap()).collect();
+    let plan = G4Plan::new(wheels.iter().map(|m| m.bus_usage())).unwrap();
+    for id in 0x201..=0x204 {
+        assert!(plan.fifo_of(id, false).is_some());
+    }
+    // The command IDs never reach the receiver: nobody else sends them.
+    for id in [0x200, 0x1FF, 0x205] {
+        assert_eq!(plan.fifo_of(id, false), None);
+    }
+    let gimbal = [
+        DjiMotor::gm6020_voltage(1).unwrap(),
+        DjiMotor::gm6020_voltage(2).unwrap(),
+    ];
+    let plan = G4Plan::new(gimbal.iter().map(|m| m.bus_usage())).unwrap();
+    assert_eq!(plan.fifo_of(0x205, false), Some(Fifo::Fifo0));
+    assert_eq!(plan.fifo_of(0x206, false), Some(Fifo::Fifo1));
+}
+
+#[test]
+fn a_mixed_bus_fits_the_g4_filter_elements() {
+    // Two M3508, a Damiao joint, two VESCs with STATUS_1 and STATUS_4.
+    let a = DjiMotor::m3508(1).unwrap();
+    let b = DjiMotor::m3508(2).unwrap();
+    let dm = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+    let mut cfg = VescConfig::new(7);
+    cfg.status_packets = VescStatusSet::STATUS_1.with(VescStatusSet::STATUS_4);
+    let v1 = VescMotor::new(0x21, cfg).unwrap();
+    let v2 = VescMotor::new(0x22, cfg).unwrap();
+    let nodes: [&dyn CanNode; 5] = [&a, &b, &dm, &v1, &v2];
+    let plan = G4Plan::new(nodes.iter().map(|n| n.bus_usage())).unwrap();
+    assert!(plan.standard().len() <= 28 && plan.extended().len() <= 8);
+    for (id, ext) in [
+        (0x201, false),
+        (0x202, false),
+        (0x11, false),
+        (0x0921, true),
+        (0x1022, true),
+    ] {
+        assert!(plan.fifo_of(id, ext).is_some(), "0x{id:X}");
+    }
+    assert_eq!(plan.fifo_of(0x0E21, true), None); // STATUS_2 was not configured
+}
