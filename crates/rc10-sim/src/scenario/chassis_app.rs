@@ -1,0 +1,140 @@
+//! The remote-driven chassis application: DR16 sticks to mecanum wheel targets, as firmware would.
+
+use super::SimError;
+use super::faults::in_window;
+use super::run::{SimMotor, TICK_US};
+use crate::plant::DjiEsc;
+use rc10_core::chassis::{LinearChassis, MecanumConfig, Twist, TwistLimiter};
+use rc10_core::remote::dbus::DbusReceiver;
+use rc10_core::time::{Duration, Instant};
+
+/// Robot firmware driving a mecanum chassis from a DR16 remote: each DBUS frame (every 14 ms)
+/// is encoded as the receiver sends it and parsed by rc10's `DbusReceiver`; the sticks become a
+/// twist (left stick: vx, vy; right stick x: ω), limited by a `TwistLimiter`, turned into wheel
+/// rpm by rc10's mecanum kinematics (saturated together) and set on motors 1–4 (FL, FR, RL,
+/// RR). Achieved twist is the chassis's forward kinematics of the true wheel speeds (no slip;
+/// each wheel carries its share of the robot's inertia as its own load).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChassisDrive {
+    /// Chassis geometry and motor signs.
+    pub geometry: MecanumConfig,
+    /// Twist at full stick deflection (m/s, m/s, rad/s).
+    pub max_twist: Twist,
+    /// Acceleration limits (m/s², m/s², rad/s²).
+    pub max_accel: Twist,
+    /// Wheel speed limit, output rpm.
+    pub max_wheel_rpm: f32,
+    /// Stick positions from a time on (ms): right x, right y, left x, left y in −1…1.
+    pub sticks: Vec<(u64, [f32; 4])>,
+    /// Windows `[from_ms, to_ms)` in which the receiver sends nothing.
+    pub radio_off: Vec<(u64, u64)>,
+}
+
+/// What the chassis application commanded and what the chassis did, at one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ChassisSample {
+    /// Twist sent to the kinematics (after the limiter).
+    pub commanded: Twist,
+    /// Twist from the true wheel speeds.
+    pub achieved: Twist,
+    /// Whether the remote link was lost.
+    pub link_lost: bool,
+}
+
+/// The robot firmware of a chassis scenario.
+pub(super) struct ChassisApp {
+    kinematics: LinearChassis<4>,
+    limiter: TwistLimiter,
+    receiver: DbusReceiver,
+}
+
+/// DR16 frame period.
+const DBUS_PERIOD_MS: u64 = 14;
+
+impl ChassisApp {
+    pub(super) fn new(drive: &ChassisDrive, motor_count: usize) -> Result<Self, SimError> {
+        if motor_count < 4 {
+            return Err(SimError::InvalidMotor {
+                motor: motor_count,
+                reason: "a chassis needs motors 1-4 (FL, FR, RL, RR)".into(),
+            });
+        }
+        let kinematics =
+            LinearChassis::mecanum(drive.geometry).map_err(|e| SimError::InvalidMotor {
+                motor: 0,
+                reason: e.to_string(),
+            })?;
+        Ok(Self {
+            kinematics,
+            limiter: TwistLimiter::new(drive.max_accel),
+            receiver: DbusReceiver::new(Duration::from_millis(100)),
+        })
+    }
+
+    pub(super) fn step(
+        &mut self,
+        drive: &ChassisDrive,
+        motors: &[Box<dyn SimMotor>],
+        escs: &[DjiEsc],
+        t_ms: u64,
+        now: Instant,
+    ) -> Result<ChassisSample, String> {
+        let radio_on = !drive
+            .radio_off
+            .iter()
+            .any(|(from, to)| in_window(t_ms, *from, *to));
+        if radio_on && t_ms.is_multiple_of(DBUS_PERIOD_MS) {
+            let sticks = drive
+                .sticks
+                .iter()
+                .rev()
+                .find(|(at, _)| *at <= t_ms)
+                .map_or([0.0; 4], |(_, s)| *s);
+            // The bytes a DR16 would send, parsed by rc10 as on the robot.
+            let _ = self.receiver.push_frame(&encode_dbus(sticks), now);
+        }
+        let signal = self.receiver.signal(now);
+        let f = signal.value;
+        let m = drive.max_twist;
+        let wanted = Twist::new(
+            f.stick(3, 0.02) * m.vx_m_s,
+            -f.stick(2, 0.02) * m.vy_m_s,
+            -f.stick(0, 0.02) * m.omega_rad_s,
+        );
+        let commanded = self.limiter.update(wanted, TICK_US as f32 * 1e-6);
+        let rpm = self
+            .kinematics
+            .wheel_rpm_limited(commanded, drive.max_wheel_rpm);
+        for (motor, target) in motors.iter().zip(rpm) {
+            motor.set_target_rpm(target).map_err(|e| e.to_string())?;
+        }
+        let mut true_rpm = [0.0f32; 4];
+        for (r, esc) in true_rpm.iter_mut().zip(escs) {
+            *r = esc.speed_rpm() as f32;
+        }
+        Ok(ChassisSample {
+            commanded,
+            achieved: self.kinematics.twist(&true_rpm),
+            link_lost: signal.lost,
+        })
+    }
+}
+
+/// A DBUS frame as a DR16 sends it for sticks in −1…1 (right x, right y, left x, left y), both
+/// switches in the middle.
+fn encode_dbus(sticks: [f32; 4]) -> [u8; 18] {
+    let mut bits: u64 = 0;
+    for (i, s) in sticks.iter().enumerate() {
+        let raw = (1024.0 + 660.0 * f64::from(s.clamp(-1.0, 1.0))).round() as u64;
+        bits |= raw << (11 * i);
+    }
+    bits |= 3 << 44 | 3 << 46;
+    let mut frame = [0u8; 18];
+    for (i, byte) in frame.iter_mut().take(6).enumerate() {
+        *byte = (bits >> (8 * i)) as u8;
+    }
+    if let Some(wheel) = frame.get_mut(16..18) {
+        wheel.copy_from_slice(&1024u16.to_le_bytes());
+    }
+    frame
+}

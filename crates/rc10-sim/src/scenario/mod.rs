@@ -1,0 +1,195 @@
+//! Scenarios (motors, targets, faults) and the world loop that runs rc10-core's real bus,
+//! scheduler and drivers against the simulated bus and plants in deterministic virtual time.
+//!
+//! Time advances from event to event in whole microseconds: plant integration every 200 µs,
+//! the rc10 tick every 1 ms, each ESC's feedback every 1 ms at its own (seeded) phase, and frame
+//! ends on the bus. Received frames are dispatched to rc10 the moment they end on the wire,
+//! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled.
+
+mod builtin;
+mod chassis_app;
+mod faults;
+mod metrics;
+mod run;
+
+pub use builtin::builtin;
+pub use chassis_app::{ChassisDrive, ChassisSample};
+pub use faults::Fault;
+pub use metrics::TargetMetrics;
+pub use run::{run, run_with_progress};
+
+use crate::bus::SimBusStats;
+use crate::plant::Load;
+use rc10_core::bus::{BusConfig, FrameBudget, RegisterError};
+use rc10_core::can::BusCounters;
+use rc10_core::motor::dji::{DjiConfig, DjiModel};
+use std::fmt;
+
+/// Most motors one simulated bus takes (rc10's registry capacity in the simulator).
+pub const MAX_MOTORS: usize = 8;
+
+/// Which controller drives a simulated motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Controller {
+    /// rc10's DJI driver with its shipped defaults.
+    Rc10,
+    /// rc10's DJI driver with this configuration.
+    Rc10With(DjiConfig),
+    /// RC10_LIB's demo speed loop (M3508 only), for comparison.
+    Rc10Legacy,
+}
+
+/// One motor of a scenario.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorSpec {
+    /// Model (and command mode for the GM6020).
+    pub model: DjiModel,
+    /// ESC id.
+    pub esc_id: u8,
+    /// What it drives.
+    pub load: Load,
+    /// Which controller.
+    pub controller: Controller,
+}
+
+/// What a target value means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TargetKind {
+    /// Current in amps.
+    Current,
+    /// Output speed in rpm.
+    Rpm,
+    /// Output angle in degrees, shortest way.
+    AngleDeg,
+    /// Output multi-turn angle in degrees.
+    TotalAngleDeg,
+}
+
+/// A target profile for one motor: values set at given times.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetSpec {
+    /// Index into [`Scenario::motors`].
+    pub motor: usize,
+    /// What the values mean.
+    pub kind: TargetKind,
+    /// `(time in ms, value)`, in time order.
+    pub steps: Vec<(u64, f32)>,
+}
+
+/// Everything a run needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// Short name (`m3508-speed-step`).
+    pub name: String,
+    /// One line saying what it shows.
+    pub description: String,
+    /// Simulated time, ms.
+    pub duration_ms: u64,
+    /// Seed for everything random (ESC phases, faults).
+    pub seed: u64,
+    /// The motors, all on one bus.
+    pub motors: Vec<MotorSpec>,
+    /// Target profiles.
+    pub targets: Vec<TargetSpec>,
+    /// Injected faults.
+    pub faults: Vec<Fault>,
+    /// rc10 bus configuration (bitrate, registration budget).
+    pub bus: BusConfig,
+    /// Robot firmware driving motors 1–4 as a mecanum chassis from a remote, if any.
+    pub chassis: Option<ChassisDrive>,
+}
+
+/// Why a scenario could not run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SimError {
+    /// A motor spec is invalid (id out of range, legacy controller on a non-M3508…).
+    InvalidMotor {
+        /// Motor index.
+        motor: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// rc10 refused to register a motor (this is what a robot would see at start-up).
+    Register {
+        /// Motor index.
+        motor: usize,
+        /// rc10's error.
+        error: RegisterError,
+    },
+    /// A target refers to a missing motor or was refused.
+    Target {
+        /// Target index.
+        target: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::InvalidMotor { motor, reason } => write!(f, "motor {motor}: {reason}"),
+            Self::Register { motor, error } => {
+                write!(f, "motor {motor} cannot be registered: {error}")
+            }
+            Self::Target { target, reason } => write!(f, "target {target}: {reason}"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// One motor at one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MotorSample {
+    /// Active target (mode's unit).
+    pub target: f32,
+    /// Physical output speed, rpm.
+    pub true_rpm: f64,
+    /// Physical output angle, continuous degrees.
+    pub true_total_deg: f64,
+    /// Speed rc10 sees, rpm.
+    pub measured_rpm: f32,
+    /// Multi-turn angle rc10 sees, degrees.
+    pub measured_total_deg: f32,
+    /// Command rc10 sent (amps or volts).
+    pub command: f32,
+    /// Physical winding current, amps.
+    pub current_amps: f64,
+    /// Physical winding temperature, °C.
+    pub temperature_c: f64,
+    /// Whether rc10 considers the motor online.
+    pub online: bool,
+}
+
+/// All motors at one tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Time, ms.
+    pub t_ms: u64,
+    /// One per motor, in scenario order.
+    pub motors: Vec<MotorSample>,
+    /// The chassis application's view, in chassis scenarios.
+    pub chassis: Option<ChassisSample>,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunResult {
+    /// The scenario's name.
+    pub name: String,
+    /// One sample per ms.
+    pub samples: Vec<Sample>,
+    /// The simulated bus's counters.
+    pub bus: SimBusStats,
+    /// rc10's own bus counters.
+    pub counters: BusCounters,
+    /// rc10's frame budget for the registered motors.
+    pub budget: FrameBudget,
+    /// Offline events per motor, as rc10 counted them.
+    pub offline_events: Vec<u32>,
+    /// Frames dropped because the controller's RX FIFO was full.
+    pub rx_overruns: u64,
+    /// Step metrics per stepped target.
+    pub metrics: Vec<TargetMetrics>,
+}

@@ -1,0 +1,336 @@
+//! The world loop: virtual time from event to event, frames delivered between bus, ESCs and rc10.
+
+use super::chassis_app::ChassisApp;
+use super::faults::{Fault, apply_state_faults, delay_us, in_window, rx_stalled};
+use super::metrics::target_metrics;
+use super::{
+    Controller, MAX_MOTORS, MotorSample, MotorSpec, RunResult, Sample, Scenario, SimError,
+    TargetKind,
+};
+use crate::bus::{Sender, SimBus, SimBusConfig};
+use crate::legacy::LegacyM3508;
+use crate::plant::{DjiEsc, MotorParams};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rand_xoshiro::rand_core::{Rng, SeedableRng};
+use rc10_core::bus::BusBuilder;
+use rc10_core::can::{CanFrame, ReceiveError};
+use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
+use rc10_core::motor::{Motor, TargetError};
+use rc10_core::node::{CanNode, TxBatch};
+use rc10_core::time::Instant;
+
+/// A motor the simulator can drive: rc10's scheduler side and the application side.
+pub(super) trait SimMotor: CanNode + Motor {}
+impl<T: CanNode + Motor> SimMotor for T {}
+
+fn build_motor(index: usize, spec: &MotorSpec) -> Result<Box<dyn SimMotor>, SimError> {
+    let invalid = |reason: String| SimError::InvalidMotor {
+        motor: index,
+        reason,
+    };
+    match spec.controller {
+        Controller::Rc10 => {
+            let cfg = DjiConfig::default_for(spec.model);
+            DjiMotor::new(spec.model, spec.esc_id, cfg)
+                .map(|m| Box::new(m) as Box<dyn SimMotor>)
+                .map_err(|e| invalid(e.to_string()))
+        }
+        Controller::Rc10With(cfg) => DjiMotor::new(spec.model, spec.esc_id, cfg)
+            .map(|m| Box::new(m) as Box<dyn SimMotor>)
+            .map_err(|e| invalid(e.to_string())),
+        Controller::Rc10Legacy => {
+            if spec.model != DjiModel::M3508 {
+                return Err(invalid("the RC10_LIB controller is for M3508 only".into()));
+            }
+            LegacyM3508::new(spec.esc_id)
+                .map(|m| Box::new(m) as Box<dyn SimMotor>)
+                .ok_or_else(|| invalid(format!("ESC id {} out of range", spec.esc_id)))
+        }
+    }
+}
+
+fn apply_target(motor: &dyn SimMotor, kind: TargetKind, value: f32) -> Result<(), TargetError> {
+    match kind {
+        TargetKind::Current => motor.set_target_current(value),
+        TargetKind::Rpm => motor.set_target_rpm(value),
+        TargetKind::AngleDeg => motor.set_target_angle_deg(value),
+        TargetKind::TotalAngleDeg => motor.set_target_total_angle_deg(value),
+    }
+}
+
+/// A uniform number in [0, 1) from the run's generator.
+fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
+    (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+}
+
+const PLANT_STEP_US: u64 = 200;
+/// RX FIFO depth of an STM32G4 FDCAN (each of its two FIFOs holds 3 frames).
+const RX_FIFO_DEPTH: usize = 3;
+pub(super) const TICK_US: u64 = 1000;
+
+/// Runs `scenario` and returns its trace and figures. Same scenario, same result, always.
+pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
+    run_with_progress(scenario, &mut |_| {})
+}
+
+/// [`run`], calling `progress` with the simulated time in ms after every simulated second.
+pub fn run_with_progress(
+    scenario: &Scenario,
+    progress: &mut dyn FnMut(u64),
+) -> Result<RunResult, SimError> {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(scenario.seed);
+    let motors: Vec<Box<dyn SimMotor>> = scenario
+        .motors
+        .iter()
+        .enumerate()
+        .map(|(i, spec)| build_motor(i, spec))
+        .collect::<Result<_, _>>()?;
+    let mut builder = BusBuilder::<MAX_MOTORS>::with_config(scenario.bus);
+    for (i, m) in motors.iter().enumerate() {
+        builder
+            .register(&**m as &dyn CanNode)
+            .map_err(|error| SimError::Register { motor: i, error })?;
+    }
+    let rc10 = builder.build();
+    for (i, t) in scenario.targets.iter().enumerate() {
+        if t.motor >= motors.len() {
+            return Err(SimError::Target {
+                target: i,
+                reason: format!("no motor {}", t.motor),
+            });
+        }
+    }
+
+    let mut bus = SimBus::new(SimBusConfig {
+        bitrate_bps: scenario.bus.bitrate_bps,
+        ..SimBusConfig::default()
+    });
+    let mut escs: Vec<DjiEsc> = Vec::new();
+    let mut next_feedback: Vec<u64> = Vec::new();
+    for spec in &scenario.motors {
+        bus.add_device();
+        let phase = rng.next_u64() % TICK_US;
+        escs.push(DjiEsc::new(
+            MotorParams::for_model(spec.model),
+            spec.esc_id,
+            spec.load,
+            phase,
+        ));
+        next_feedback.push(phase);
+    }
+
+    let mut app = match &scenario.chassis {
+        Some(drive) => Some(ChassisApp::new(drive, motors.len())?),
+        None => None,
+    };
+
+    let end_us = scenario.duration_ms * 1000;
+    let (mut next_plant, mut next_tick) = (0u64, 0u64);
+    let mut batch = TxBatch::new();
+    let mut samples = Vec::with_capacity(scenario.duration_ms as usize);
+    let mut next_step = vec![0usize; scenario.targets.len()];
+    // Frames on their way to the controller under a delay fault: (arrival µs, frame).
+    let mut delayed: std::collections::VecDeque<(u64, CanFrame)> = Default::default();
+    // The controller's RX FIFO while its receive path is stalled.
+    let mut rx_fifo: std::collections::VecDeque<CanFrame> = Default::default();
+    let mut rx_overruns = 0u64;
+
+    loop {
+        let mut t = next_plant.min(next_tick);
+        if let Some(&f) = next_feedback.iter().min() {
+            t = t.min(f);
+        }
+        if let Some(b) = bus.busy_until() {
+            t = t.min(b);
+        }
+        if let Some(&(d, _)) = delayed.front() {
+            t = t.min(d);
+        }
+        if t >= end_us {
+            break;
+        }
+        let t_ms = t / 1000;
+
+        // A frame ends on the wire: faults, then delivery to everyone but its sender.
+        if let Some((sender, frame)) = bus.complete(t) {
+            let to_mcu = deliver(scenario, &mut rng, &mut bus, &mut escs, sender, frame, t_ms);
+            if let Some(frame) = to_mcu {
+                if rx_stalled(scenario, t_ms) {
+                    if rx_fifo.len() < RX_FIFO_DEPTH {
+                        rx_fifo.push_back(frame);
+                    } else {
+                        rx_overruns += 1;
+                        rc10.record_receive_error(ReceiveError::Overrun);
+                    }
+                } else {
+                    match delay_us(scenario, t_ms) {
+                        0 => {
+                            rc10.dispatch(&frame, Instant::from_micros(t));
+                        }
+                        d => delayed.push_back((t + d, frame)),
+                    }
+                }
+            }
+        }
+        if !rx_stalled(scenario, t_ms) {
+            // The receive path runs again: the FIFO drains now, in order.
+            while let Some(frame) = rx_fifo.pop_front() {
+                rc10.dispatch(&frame, Instant::from_micros(t));
+            }
+        }
+        while let Some(&(d, frame)) = delayed.front() {
+            if d > t {
+                break;
+            }
+            delayed.pop_front();
+            if !bus.mcu_bus_off() {
+                rc10.dispatch(&frame, Instant::from_micros(d));
+            }
+        }
+
+        if t == next_plant {
+            apply_state_faults(scenario, &mut bus, &mut escs, t_ms, t % 1000 == 0);
+            for esc in &mut escs {
+                esc.step(t, PLANT_STEP_US as f64 * 1e-6);
+            }
+            next_plant += PLANT_STEP_US;
+        }
+
+        for (i, esc) in escs.iter().enumerate() {
+            if next_feedback.get(i) == Some(&t) {
+                if esc.feedback_due(t)
+                    && let Some(frame) = esc.feedback_frame()
+                {
+                    bus.device_send(i, frame);
+                }
+                if let Some(n) = next_feedback.get_mut(i) {
+                    *n += TICK_US;
+                }
+            }
+        }
+
+        if t == next_tick {
+            for (i, spec) in scenario.targets.iter().enumerate() {
+                let Some(k) = next_step.get_mut(i) else {
+                    continue;
+                };
+                while let Some(&(at_ms, value)) = spec.steps.get(*k) {
+                    if at_ms > t_ms {
+                        break;
+                    }
+                    if let Some(m) = motors.get(spec.motor) {
+                        apply_target(&**m, spec.kind, value).map_err(|e| SimError::Target {
+                            target: i,
+                            reason: e.to_string(),
+                        })?;
+                    }
+                    *k += 1;
+                }
+            }
+            let now = Instant::from_micros(t);
+            let chassis = match (&mut app, &scenario.chassis) {
+                (Some(app), Some(drive)) => Some(
+                    app.step(drive, &motors, &escs, t_ms, now)
+                        .map_err(|reason| SimError::Target { target: 0, reason })?,
+                ),
+                _ => None,
+            };
+            rc10.tick(now, TICK_US as f32 * 1e-6, &mut batch);
+            rc10.transmit(&batch, &mut bus.mcu_port());
+            samples.push(Sample {
+                t_ms,
+                motors: motors
+                    .iter()
+                    .zip(&escs)
+                    .map(|(m, esc)| {
+                        let s = m.state();
+                        MotorSample {
+                            target: s.target,
+                            true_rpm: esc.speed_rpm(),
+                            true_total_deg: esc.total_angle_deg(),
+                            measured_rpm: s.speed_rpm,
+                            measured_total_deg: s.total_angle_deg.unwrap_or(0.0),
+                            command: s.command,
+                            current_amps: esc.current_amps(),
+                            temperature_c: esc.temperature_c(),
+                            online: s.online,
+                        }
+                    })
+                    .collect(),
+                chassis,
+            });
+            next_tick += TICK_US;
+            if t_ms % 1000 == 999 {
+                progress(t_ms + 1);
+            }
+        }
+
+        bus.start_next(t);
+    }
+
+    let metrics = scenario
+        .targets
+        .iter()
+        .enumerate()
+        .filter_map(|(i, spec)| target_metrics(i, spec, &samples))
+        .collect();
+    Ok(RunResult {
+        name: scenario.name.clone(),
+        bus: bus.stats(),
+        counters: rc10.stats().snapshot(),
+        budget: rc10.budget(),
+        offline_events: motors.iter().map(|m| m.state().offline_events).collect(),
+        rx_overruns,
+        metrics,
+        samples,
+    })
+}
+
+/// Applies loss and corruption to a frame that ended on the wire, hands it to the ESCs, and
+/// returns it if the controller receives it.
+fn deliver(
+    scenario: &Scenario,
+    rng: &mut Xoshiro256PlusPlus,
+    bus: &mut SimBus,
+    escs: &mut [DjiEsc],
+    sender: Sender,
+    frame: CanFrame,
+    t_ms: u64,
+) -> Option<CanFrame> {
+    let mut frame = frame;
+    for fault in &scenario.faults {
+        match *fault {
+            Fault::FrameLoss {
+                probability,
+                from_ms,
+                to_ms,
+            } if in_window(t_ms, from_ms, to_ms) && uniform(rng) < probability => {
+                bus.record_lost();
+                return None;
+            }
+            Fault::Corruption {
+                probability,
+                from_ms,
+                to_ms,
+            } if in_window(t_ms, from_ms, to_ms) && uniform(rng) < probability => {
+                // A wrong DLC: the receiver must reject it, not parse garbage.
+                let cut = frame
+                    .data()
+                    .len()
+                    .saturating_sub(1 + (rng.next_u64() % 4) as usize);
+                if let Some(short) =
+                    CanFrame::new(frame.id(), frame.data().get(..cut).unwrap_or(&[]))
+                {
+                    frame = short;
+                }
+            }
+            _ => {}
+        }
+    }
+    for (i, esc) in escs.iter_mut().enumerate() {
+        if sender != Sender::Device(i) {
+            esc.on_frame(&frame);
+        }
+    }
+    (sender != Sender::Mcu && !bus.mcu_bus_off()).then_some(frame)
+}
