@@ -4,176 +4,23 @@
 //! state behind one blocking mutex, register it.
 //!
 //! MyMotor's (made-up) protocol: command on 0x300 + id, DLC 2, int16 big-endian milliamps;
-//! feedback on 0x380 + id, DLC 4: rotor rpm (i16 BE), current in mA (i16 BE); gear 27:1.
+//! feedback on 0x380 + id, DLC 4: rotor rpm (i16 BE), current in mA (i16 BE); gear 27:1. Its
+//! code is the firmware example's (`examples/stm32g474/src/my_motor.rs`): what runs on the
+//! board is what is tested here.
 
 // Test code: a failed setup or assertion should stop the test.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
-use core::cell::RefCell;
-use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+#[path = "../examples/stm32g474/src/my_motor.rs"]
+mod my_motor;
+
+use my_motor::MyMotor;
 use rc10_core::bus::{BusBuilder, Dispatch};
-use rc10_core::can::{CanFrame, IdFilter};
-use rc10_core::encoder::GearRatio;
-use rc10_core::math::saturate;
+use rc10_core::can::CanFrame;
+use rc10_core::motor::Motor;
 use rc10_core::motor::dji::DjiMotor;
-use rc10_core::motor::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
-use rc10_core::node::{BusUsage, CanNode, FrameError, TxBatch};
-use rc10_core::pid::{IncrementalPid, IncrementalPidConfig};
+use rc10_core::node::TxBatch;
 use rc10_core::time::Instant;
-
-const GEAR: GearRatio = match GearRatio::new(27, 1) {
-    Some(g) => g,
-    None => panic!("gear"),
-};
-const MAX_AMPS: f32 = 8.0;
-
-#[derive(Debug)]
-struct MyState {
-    mode: ControlMode,
-    target: f32,
-    speed_rpm: f32,
-    current_amps: f32,
-    liveness: Liveness,
-    command_amps: f32,
-    speed_pid: IncrementalPid,
-}
-
-struct MyMotor {
-    id: u8,
-    health: HealthConfig,
-    state: Mutex<CriticalSectionRawMutex, RefCell<MyState>>,
-}
-
-impl MyMotor {
-    const fn new(id: u8) -> Self {
-        let pid = match IncrementalPid::new(
-            IncrementalPidConfig::new(0.05, 2.0, 0.0).with_output_limit(MAX_AMPS),
-        ) {
-            Ok(p) => p,
-            Err(_) => panic!("gains"),
-        };
-        Self {
-            id,
-            health: HealthConfig::DEFAULT,
-            state: Mutex::new(RefCell::new(MyState {
-                mode: ControlMode::Disabled,
-                target: 0.0,
-                speed_rpm: 0.0,
-                current_amps: 0.0,
-                liveness: Liveness::NEW,
-                command_amps: 0.0,
-                speed_pid: pid,
-            })),
-        }
-    }
-
-    fn set(&self, mode: ControlMode, target: f32) -> Result<(), TargetError> {
-        if !target.is_finite() {
-            return Err(TargetError::NotFinite);
-        }
-        self.state.lock(|s| {
-            let mut s = s.borrow_mut();
-            if s.mode != mode {
-                s.speed_pid.reset();
-            }
-            s.mode = mode;
-            s.target = target;
-        });
-        Ok(())
-    }
-}
-
-impl CanNode for MyMotor {
-    fn bus_usage(&self) -> BusUsage {
-        // Every ID it listens on and every ID it sends on: the bus checks them against all
-        // other nodes (and an STM32 adapter builds its acceptance filters from them).
-        let id = u16::from(self.id);
-        BusUsage::NONE
-            .listening(IdFilter::standard(0x380 + id), 1000)
-            .sending(IdFilter::standard(0x300 + id), 1)
-    }
-
-    fn update_feedback(&self, frame: &CanFrame, now: Instant) -> Result<(), FrameError> {
-        let [r0, r1, c0, c1] = *frame.data() else {
-            return Err(FrameError::WrongLength {
-                dlc: frame.dlc() as u8,
-            });
-        };
-        self.state.lock(|s| {
-            let mut s = s.borrow_mut();
-            s.speed_rpm = f32::from(i16::from_be_bytes([r0, r1])) / GEAR.as_f32();
-            s.current_amps = f32::from(i16::from_be_bytes([c0, c1])) / 1000.0;
-            s.liveness.record_feedback(now);
-        });
-        Ok(())
-    }
-
-    fn update(&self, now: Instant, dt_s: f32) {
-        self.state.lock(|s| {
-            let mut s = s.borrow_mut();
-            s.liveness.check(&self.health, now);
-            s.command_amps = if !s.liveness.is_online() {
-                0.0
-            } else {
-                match s.mode {
-                    ControlMode::Current => saturate(s.target, MAX_AMPS),
-                    ControlMode::Speed => {
-                        let (target, rpm) = (s.target, s.speed_rpm);
-                        s.speed_pid.update(target, rpm, dt_s).output
-                    }
-                    _ => 0.0,
-                }
-            };
-        });
-    }
-
-    fn pack_command(&self, out: &mut TxBatch) {
-        let amps = self.state.lock(|s| s.borrow().command_amps);
-        let milliamps = (amps * 1000.0).round() as i16; // `as` saturates: no wrap
-        let frame = CanFrame::standard(0x300 + u16::from(self.id), &milliamps.to_be_bytes());
-        if let Some(f) = frame {
-            let _ = out.push(f);
-        }
-    }
-}
-
-impl Motor for MyMotor {
-    fn set_target_current(&self, amps: f32) -> Result<(), TargetError> {
-        self.set(ControlMode::Current, amps)
-    }
-    fn set_target_rpm(&self, rpm: f32) -> Result<(), TargetError> {
-        self.set(ControlMode::Speed, rpm)
-    }
-    fn set_target_angle_deg(&self, _angle_deg: f32) -> Result<(), TargetError> {
-        Err(TargetError::Unsupported)
-    }
-    fn set_target_total_angle_deg(&self, _angle_deg: f32) -> Result<(), TargetError> {
-        Err(TargetError::Unsupported)
-    }
-    fn disable(&self) {
-        let _ = self.set(ControlMode::Disabled, 0.0);
-    }
-    fn state(&self) -> MotorState {
-        self.state.lock(|s| {
-            let s = s.borrow();
-            MotorState {
-                online: s.liveness.is_online(),
-                mode: s.mode,
-                target: s.target,
-                speed_rpm: s.speed_rpm,
-                current_amps: Some(s.current_amps),
-                command: s.command_amps,
-                last_feedback: s.liveness.last_feedback(),
-                offline_events: s.liveness.offline_events(),
-                ..MotorState::default()
-            }
-        })
-    }
-    fn gear_ratio(&self) -> GearRatio {
-        GEAR
-    }
-}
 
 static MY: MyMotor = MyMotor::new(3);
 static DJI: DjiMotor = match DjiMotor::m3508(1) {

@@ -15,6 +15,8 @@
 //! thread mode and are preempted by it.
 #![no_std]
 
+pub mod my_motor;
+
 use defmt_rtt as _;
 use embassy_executor::{InterruptExecutor, SendSpawner};
 use embassy_stm32::interrupt::{InterruptExt, Priority};
