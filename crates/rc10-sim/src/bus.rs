@@ -1,6 +1,7 @@
 //! A simulated classic CAN bus in virtual time: frame durations from the exact bit count
 //! (stuffing included) at the configured bitrate, arbitration by ID among all nodes with a
-//! frame waiting, and bounded TX queues (the STM32G4's 3 TX buffers on the controller side).
+//! frame waiting, and bounded TX queues (the STM32G4's 3 TX buffers on the controller side,
+//! sent oldest first or lowest ID first: [`TxOrder`]).
 //!
 //! The bus does not run by itself: the world loop asks it for the next moment something
 //! happens ([`SimBus::busy_until`]), completes frames ([`SimBus::complete`]) and starts the next
@@ -18,14 +19,35 @@ pub enum Sender {
     Device(usize),
 }
 
+/// Which of the controller's pending TX frames enters arbitration next: the STM32G4 FDCAN's
+/// TX FIFO or TX queue mode.
+///
+/// Only the order is modelled: in both modes a full set of buffers refuses the next frame
+/// ([`SendError::Full`]), nothing pending is aborted or replaced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TxOrder {
+    /// TX FIFO: the oldest pending frame goes first, whatever its ID (`TXBC.TFQM = 0`; HAL
+    /// `FDCAN_TX_FIFO_OPERATION`; embassy-stm32 `TxBufferMode::Fifo`, which rc10-stm32 sets).
+    #[default]
+    Fifo,
+    /// TX queue: the pending frame with the lowest ID (highest priority, compared as in
+    /// arbitration) goes first (`TXBC.TFQM = 1`; HAL `FDCAN_TX_QUEUE_OPERATION`; embassy-stm32's
+    /// default `TxBufferMode::Priority`). Frames with the same ID go oldest first (the FDCAN
+    /// takes the lowest buffer number; buffer numbers are not modelled).
+    LowestIdFirst,
+}
+
 /// Bus parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SimBusConfig {
     /// Bitrate in bits per second (1 Mbit/s for DJI motors).
     pub bitrate_bps: u32,
-    /// TX buffers of the controller (3 on an STM32G4 FDCAN).
+    /// TX buffers of the controller, in frames (3 on an STM32G4 FDCAN).
     pub mcu_tx_depth: usize,
-    /// TX buffers of each device.
+    /// Order in which the controller's pending TX frames are sent ([`TxOrder::Fifo`] by
+    /// default).
+    pub mcu_tx_order: TxOrder,
+    /// TX buffers of each device, in frames (always sent oldest first).
     pub device_tx_depth: usize,
 }
 
@@ -34,6 +56,7 @@ impl Default for SimBusConfig {
         Self {
             bitrate_bps: 1_000_000,
             mcu_tx_depth: 3,
+            mcu_tx_order: TxOrder::Fifo,
             device_tx_depth: 3,
         }
     }
@@ -144,16 +167,33 @@ impl SimBus {
         self.stats.lost += 1;
     }
 
+    /// Index in `mcu_tx` of the controller's frame that enters arbitration next, per
+    /// [`SimBusConfig::mcu_tx_order`].
+    fn mcu_next(&self) -> Option<usize> {
+        match self.config.mcu_tx_order {
+            TxOrder::Fifo => (!self.mcu_tx.is_empty()).then_some(0),
+            // `min_by_key` keeps the first of equal keys: the oldest.
+            TxOrder::LowestIdFirst => self
+                .mcu_tx
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, f)| arbitration_key(f))
+                .map(|(i, _)| i),
+        }
+    }
+
     /// If the bus is idle, starts the waiting frame that wins arbitration (lowest ID; a
-    /// standard ID beats an extended one with the same first 11 bits).
+    /// standard ID beats an extended one with the same first 11 bits). The controller offers
+    /// one of its pending frames, chosen by [`SimBusConfig::mcu_tx_order`]; each device offers
+    /// its oldest.
     pub fn start_next(&mut self, now_us: u64) {
         if self.on_wire.is_some() {
             return;
         }
         let mut best: Option<(u64, Sender)> = None;
-        let candidates = self
-            .mcu_tx
-            .front()
+        let mcu_next = self.mcu_next();
+        let candidates = mcu_next
+            .and_then(|i| self.mcu_tx.get(i))
             .map(|f| (Sender::Mcu, f))
             .into_iter()
             .chain(
@@ -170,7 +210,7 @@ impl SimBus {
         }
         let Some((_, sender)) = best else { return };
         let frame = match sender {
-            Sender::Mcu => self.mcu_tx.pop_front(),
+            Sender::Mcu => mcu_next.and_then(|i| self.mcu_tx.remove(i)),
             Sender::Device(i) => self.device_tx.get_mut(i).and_then(VecDeque::pop_front),
         };
         if let Some(frame) = frame {
@@ -270,6 +310,116 @@ mod tests {
         assert!(arbitration_key(&s) < arbitration_key(&e));
         let e_low = CanFrame::extended(0x0000_0901, &[]).unwrap(); // base 0
         assert!(arbitration_key(&e_low) < arbitration_key(&s));
+    }
+
+    /// Queues 0x2FF, 0x200, 0x1FF on the controller (no devices) and returns the order in
+    /// which they complete on the wire.
+    fn mcu_send_order(order: TxOrder) -> Vec<u16> {
+        let mut bus = SimBus::new(SimBusConfig {
+            mcu_tx_order: order,
+            ..SimBusConfig::default()
+        });
+        for id in [0x2FF, 0x200, 0x1FF] {
+            bus.mcu_port().try_send(&std_frame(id)).unwrap();
+        }
+        let mut sent = Vec::new();
+        let mut now = 0;
+        bus.start_next(now);
+        while let Some(end) = bus.busy_until() {
+            now = end;
+            let (sender, frame) = bus.complete(now).unwrap();
+            assert_eq!(sender, Sender::Mcu);
+            let Id::Standard(id) = frame.id() else {
+                panic!("sent only standard frames")
+            };
+            sent.push(id.as_raw());
+            bus.start_next(now);
+        }
+        sent
+    }
+
+    #[test]
+    fn default_mcu_tx_order_is_fifo() {
+        assert_eq!(SimBusConfig::default().mcu_tx_order, TxOrder::Fifo);
+        assert_eq!(TxOrder::default(), TxOrder::Fifo);
+    }
+
+    #[test]
+    fn fifo_sends_the_oldest_pending_frame_first() {
+        assert_eq!(mcu_send_order(TxOrder::Fifo), vec![0x2FF, 0x200, 0x1FF]);
+    }
+
+    #[test]
+    fn lowest_id_first_sends_the_highest_priority_pending_frame_first() {
+        assert_eq!(
+            mcu_send_order(TxOrder::LowestIdFirst),
+            vec![0x1FF, 0x200, 0x2FF]
+        );
+    }
+
+    #[test]
+    fn lowest_id_first_reorders_frames_queued_while_the_bus_is_busy() {
+        // 0x2FF takes the wire; meanwhile 0x205 and then 0x201 are queued: the queue sends
+        // 0x201 next, the FIFO 0x205.
+        for (order, expected) in [(TxOrder::Fifo, 0x205), (TxOrder::LowestIdFirst, 0x201)] {
+            let mut bus = SimBus::new(SimBusConfig {
+                mcu_tx_order: order,
+                ..SimBusConfig::default()
+            });
+            bus.mcu_port().try_send(&std_frame(0x2FF)).unwrap();
+            bus.start_next(0);
+            bus.mcu_port().try_send(&std_frame(0x205)).unwrap();
+            bus.mcu_port().try_send(&std_frame(0x201)).unwrap();
+            let end = bus.busy_until().unwrap();
+            assert_eq!(bus.complete(end).unwrap().1, std_frame(0x2FF));
+            bus.start_next(end);
+            let end2 = bus.busy_until().unwrap();
+            assert_eq!(
+                bus.complete(end2).unwrap().1,
+                std_frame(expected),
+                "{order:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn lowest_id_first_keeps_arrival_order_for_equal_ids() {
+        let mut bus = SimBus::new(SimBusConfig {
+            mcu_tx_order: TxOrder::LowestIdFirst,
+            ..SimBusConfig::default()
+        });
+        let first = CanFrame::standard(0x200, &[1; 8]).unwrap();
+        let second = CanFrame::standard(0x200, &[2; 8]).unwrap();
+        bus.mcu_port().try_send(&std_frame(0x2FF)).unwrap();
+        bus.mcu_port().try_send(&first).unwrap();
+        bus.mcu_port().try_send(&second).unwrap();
+        bus.start_next(0);
+        let end = bus.busy_until().unwrap();
+        assert_eq!(bus.complete(end).unwrap().1, first);
+        bus.start_next(end);
+        let end2 = bus.busy_until().unwrap();
+        assert_eq!(bus.complete(end2).unwrap().1, second);
+    }
+
+    #[test]
+    fn lowest_id_first_still_loses_arbitration_to_a_lower_device_id() {
+        let mut bus = SimBus::new(SimBusConfig {
+            mcu_tx_order: TxOrder::LowestIdFirst,
+            ..SimBusConfig::default()
+        });
+        let esc = bus.add_device();
+        bus.mcu_port().try_send(&std_frame(0x2FF)).unwrap();
+        bus.mcu_port().try_send(&std_frame(0x200)).unwrap();
+        bus.device_send(esc, std_frame(0x1FF));
+        bus.start_next(0);
+        let end = bus.busy_until().unwrap();
+        assert_eq!(
+            bus.complete(end),
+            Some((Sender::Device(0), std_frame(0x1FF)))
+        );
+        bus.start_next(end);
+        let end2 = bus.busy_until().unwrap();
+        assert_eq!(bus.complete(end2), Some((Sender::Mcu, std_frame(0x200))));
     }
 
     #[test]

@@ -44,8 +44,17 @@
 //! radio_off = [[3300, 3700]]          # windows without DBUS frames
 //! ```
 //!
+//! The order in which the controller's 3 TX buffers send (optional; the STM32G4 FDCAN's TX
+//! FIFO or TX queue mode, see [`TxOrder`]):
+//!
+//! ```toml
+//! [bus]
+//! tx_order = "fifo"   # fifo (default: oldest first, as rc10-stm32 sets it) | lowest-id-first
+//! ```
+//!
 //! Unknown keys are errors, and every error names the entry and field at fault.
 
+use crate::bus::TxOrder;
 use crate::plant::Load;
 use crate::scenario::{
     ChassisDrive, Controller, Fault, MotorSpec, Scenario, TargetKind, TargetSpec,
@@ -106,6 +115,23 @@ struct FileScenario {
     faults: Vec<FileFault>,
     #[serde(default)]
     chassis: Option<FileChassis>,
+    #[serde(default)]
+    bus: FileBus,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileBus {
+    #[serde(default)]
+    tx_order: FileTxOrder,
+}
+
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+enum FileTxOrder {
+    #[default]
+    Fifo,
+    LowestIdFirst,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize)]
@@ -467,6 +493,10 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
         targets,
         faults,
         bus,
+        tx_order: match file.bus.tx_order {
+            FileTxOrder::Fifo => TxOrder::Fifo,
+            FileTxOrder::LowestIdFirst => TxOrder::LowestIdFirst,
+        },
         chassis,
     })
 }
@@ -625,6 +655,35 @@ mod tests {
         assert_eq!(s.motors[0].controller, Controller::Rc10);
         assert_eq!(s.targets[0].motor, 0);
         assert_eq!(s.bus, BusConfig::DEFAULT);
+        assert_eq!(s.tx_order, TxOrder::Fifo);
+    }
+
+    #[test]
+    fn bus_tx_order_parses() {
+        for (value, order) in [
+            ("fifo", TxOrder::Fifo),
+            ("lowest-id-first", TxOrder::LowestIdFirst),
+        ] {
+            let text = format!("{MINIMAL}\n[bus]\ntx_order = \"{value}\"\n");
+            assert_eq!(parse(&text).unwrap().tx_order, order, "{value}");
+        }
+        let empty = format!("{MINIMAL}\n[bus]\n");
+        assert_eq!(parse(&empty).unwrap().tx_order, TxOrder::Fifo);
+    }
+
+    #[test]
+    fn unknown_tx_order_lists_the_known_ones() {
+        let text = format!("{MINIMAL}\n[bus]\ntx_order = \"lifo\"\n");
+        let e = parse(&text).unwrap_err();
+        assert!(matches!(e, FileError::Syntax(_)), "{e:?}");
+        let e = e.to_string();
+        assert!(
+            e.contains("tx_order") && e.contains("lifo") && e.contains("lowest-id-first"),
+            "{e}"
+        );
+        let unknown_key = format!("{MINIMAL}\n[bus]\ntx_mode = \"fifo\"\n");
+        let e = parse(&unknown_key).unwrap_err().to_string();
+        assert!(e.contains("tx_mode"), "{e}");
     }
 
     #[test]

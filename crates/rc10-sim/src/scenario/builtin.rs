@@ -1,6 +1,7 @@
 //! The built-in scenarios (`rc10-sim list`).
 
 use super::{ChassisDrive, Controller, Fault, MotorSpec, Scenario, TargetKind, TargetSpec};
+use crate::bus::TxOrder;
 use crate::plant::Load;
 use rc10_core::bus::BusConfig;
 use rc10_core::chassis::{MecanumConfig, Twist};
@@ -26,6 +27,7 @@ pub fn builtin() -> Vec<Scenario> {
         targets: Vec::new(),
         faults: Vec::new(),
         bus: BusConfig::DEFAULT,
+        tx_order: TxOrder::Fifo,
         chassis: None,
     };
     let speed_step = |motor| TargetSpec {

@@ -4,7 +4,8 @@
 //! Time advances from event to event in whole microseconds: plant integration every 200 µs,
 //! the rc10 tick every 1 ms, each ESC's feedback every 1 ms at its own (seeded) phase, and frame
 //! ends on the bus. Received frames are dispatched to rc10 the moment they end on the wire,
-//! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled.
+//! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled,
+//! sent in FIFO or lowest-ID-first order ([`Scenario::tx_order`]).
 
 mod builtin;
 mod chassis_app;
@@ -18,7 +19,7 @@ pub use faults::Fault;
 pub use metrics::TargetMetrics;
 pub use run::{run, run_with_progress};
 
-use crate::bus::SimBusStats;
+use crate::bus::{SimBusStats, TxOrder};
 use crate::plant::Load;
 use rc10_core::bus::{BusConfig, FrameBudget, RegisterError};
 use rc10_core::can::BusCounters;
@@ -95,6 +96,10 @@ pub struct Scenario {
     pub faults: Vec<Fault>,
     /// rc10 bus configuration (bitrate, registration budget).
     pub bus: BusConfig,
+    /// Order in which the simulated controller sends its pending TX frames (the FDCAN's TX
+    /// FIFO or TX queue mode); [`TxOrder::Fifo`], as rc10-stm32 configures the FDCAN, by
+    /// default.
+    pub tx_order: TxOrder,
     /// Robot firmware driving motors 1–4 as a mecanum chassis from a remote, if any.
     pub chassis: Option<ChassisDrive>,
 }

@@ -68,6 +68,15 @@ const PLANT_STEP_US: u64 = 200;
 const RX_FIFO_DEPTH: usize = 3;
 pub(super) const TICK_US: u64 = 1000;
 
+/// The simulated bus for `scenario`: its bitrate and TX order, the STM32G4's buffer depths.
+fn sim_bus_config(scenario: &Scenario) -> SimBusConfig {
+    SimBusConfig {
+        bitrate_bps: scenario.bus.bitrate_bps,
+        mcu_tx_order: scenario.tx_order,
+        ..SimBusConfig::default()
+    }
+}
+
 /// Runs `scenario` and returns its trace and figures. Same scenario, same result, always.
 pub fn run(scenario: &Scenario) -> Result<RunResult, SimError> {
     run_with_progress(scenario, &mut |_| {})
@@ -101,10 +110,7 @@ pub fn run_with_progress(
         }
     }
 
-    let mut bus = SimBus::new(SimBusConfig {
-        bitrate_bps: scenario.bus.bitrate_bps,
-        ..SimBusConfig::default()
-    });
+    let mut bus = SimBus::new(sim_bus_config(scenario));
     let mut escs: Vec<DjiEsc> = Vec::new();
     let mut next_feedback: Vec<u64> = Vec::new();
     for spec in &scenario.motors {
@@ -333,4 +339,23 @@ fn deliver(
         }
     }
     (sender != Sender::Mcu && !bus.mcu_bus_off()).then_some(frame)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus::TxOrder;
+    use crate::scenario::builtin;
+
+    #[test]
+    fn scenario_bitrate_and_tx_order_reach_the_simulated_bus() {
+        let mut scenario = builtin().swap_remove(0);
+        assert_eq!(sim_bus_config(&scenario).mcu_tx_order, TxOrder::Fifo);
+        scenario.tx_order = TxOrder::LowestIdFirst;
+        scenario.bus.bitrate_bps = 500_000;
+        let config = sim_bus_config(&scenario);
+        assert_eq!(config.mcu_tx_order, TxOrder::LowestIdFirst);
+        assert_eq!(config.bitrate_bps, 500_000);
+        assert_eq!(config.mcu_tx_depth, SimBusConfig::default().mcu_tx_depth);
+    }
 }
