@@ -368,9 +368,18 @@ impl Encoder {
     }
 }
 
-/// Wraps a count difference into `[-n/2, n/2)`.
+/// Wraps a count difference into `[-n/2, n/2)`. `delta` is a difference of two readings
+/// below `n`, so it lies in `(-n, n)` and one correction suffices: no division (an `i64`
+/// remainder is a library call on the Cortex-M4).
 fn wrap_counts(delta: i64, n: i64) -> i64 {
-    (delta + n / 2).rem_euclid(n) - n / 2
+    let half = n / 2;
+    if delta >= n - half {
+        delta - n
+    } else if delta < -half {
+        delta + n
+    } else {
+        delta
+    }
 }
 
 #[cfg(test)]

@@ -534,10 +534,11 @@ impl DjiMotor {
                 Some(prev) if now > prev => (now - prev).as_micros().max(FEEDBACK_PERIOD_US),
                 _ => FEEDBACK_PERIOD_US,
             };
+            // Gaps beyond 2^32 µs (71 min) saturate: the offline timeout is long past anyway.
+            let gap_us = u32::try_from(gap_us).unwrap_or(u32::MAX) as f32;
             let mean_rotor_rpm = (f32::from(s.rotor_rpm) + f32::from(rotor_rpm)) * 0.5;
-            mean_rotor_rpm
-                * crate::time::micros_to_s(gap_us)
-                * (f32::from(DJI_COUNTS_PER_REV) / 60.0)
+            // rpm · µs · 8192 counts/turn / (60 s/min · 10⁶ µs/s)
+            mean_rotor_rpm * gap_us * (f32::from(DJI_COUNTS_PER_REV) / 60.0e6)
         };
         s.encoder
             .update_predicted(raw_angle, predicted_counts)

@@ -1,0 +1,253 @@
+//! The rc10-core hot paths on the Cortex-M4 instruction set: prints a table (min / median /
+//! max / mean instructions) and one `figure NAME VALUE` line per tracked figure, which
+//! `benches/m4/run --check` compares with `baseline.txt`.
+//!
+//! Scenarios: DJI M3508s (1, 4, and 8 on two buses) in speed and in angle mode with feedback
+//! that changes every tick (one `Bus::tick` each: update + pack, send excluded); one feedback
+//! frame routed and parsed among 4 motors at start and after 10⁶ frames at full speed; one
+//! step of each PID kind; one `DeltaTime` update.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+use cortex_m_rt::entry;
+use cortex_m_semihosting::{debug, hprintln};
+use panic_semihosting as _;
+use rc10_bench_m4::{Calibration, min_median_max, ticks, timer_start};
+use rc10_core::bus::{Bus, BusBuilder};
+use rc10_core::can::CanFrame;
+use rc10_core::motor::Motor;
+use rc10_core::motor::dji::DjiMotor;
+use rc10_core::node::TxBatch;
+use rc10_core::pid::{IncrementalPid, IncrementalPidConfig, Pid, PidConfig};
+use rc10_core::time::{DeltaTime, Duration, Instant};
+
+const SAMPLES: usize = 1000;
+
+const fn m3508(id: u8) -> DjiMotor {
+    match DjiMotor::m3508(id) {
+        Ok(m) => m,
+        Err(_) => panic!("id"),
+    }
+}
+
+/// Two buses' worth of M3508s (ids 1–4 on each).
+static MOTORS: [DjiMotor; 8] = [
+    m3508(1),
+    m3508(2),
+    m3508(3),
+    m3508(4),
+    m3508(1),
+    m3508(2),
+    m3508(3),
+    m3508(4),
+];
+
+#[derive(Clone, Copy, PartialEq)]
+enum Mode {
+    Speed,
+    Angle,
+}
+
+/// Feedback of ESC `id` at tick `k`: the rotor turning at about 3000 rpm, its speed varying.
+fn feedback(id: u16, k: u32) -> CanFrame {
+    let angle = ((k * 500 + u32::from(id) * 1000) % 8192) as u16;
+    let rpm = 3000 + (k % 64) as i16;
+    let a = angle.to_be_bytes();
+    let r = rpm.to_be_bytes();
+    CanFrame::standard(0x200 + id, &[a[0], a[1], r[0], r[1], 0x01, 0x00, 35, 0])
+        .unwrap_or(CanFrame::standard(0x200, &[]).unwrap_or_else(|| unreachable!()))
+}
+
+struct Figures {
+    cal: Calibration,
+}
+
+impl Figures {
+    fn row(&self, name: &str, samples: &mut [u32], figure: Stat) {
+        let n = samples.len().max(1) as u64;
+        let mean = (samples.iter().map(|s| u64::from(*s)).sum::<u64>() / n) as u32;
+        let (min, median, max) = min_median_max(samples);
+        hprintln!(
+            "{:<34} {:>7} {:>7} {:>7} {:>7}",
+            name,
+            min,
+            median,
+            max,
+            mean
+        );
+        let value = match figure {
+            Stat::Median => median,
+            Stat::Max => max,
+            Stat::Mean => mean,
+        };
+        hprintln!("figure {} {}", name, value);
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Stat {
+    Median,
+    Max,
+    Mean,
+}
+
+fn tick_samples(f: &Figures, motors: &'static [DjiMotor], mode: Mode, out: &mut [u32; SAMPLES]) {
+    let mut first: BusBuilder<'static, 8> = BusBuilder::new();
+    let mut second: BusBuilder<'static, 8> = BusBuilder::new();
+    for (i, m) in motors.iter().enumerate() {
+        let builder = if i < 4 { &mut first } else { &mut second };
+        let _ = builder.register(m);
+        let _ = match mode {
+            Mode::Speed => m.set_target_rpm(300.0),
+            Mode::Angle => m.set_target_angle_deg(90.0),
+        };
+    }
+    let buses: [Bus<'static, 8>; 2] = [first.build(), second.build()];
+    let mut batch = TxBatch::new();
+    for k in 0..(SAMPLES as u32 + 20) {
+        let now = Instant::from_micros(1_000_000 + u64::from(k) * 1000);
+        for (i, _) in motors.iter().enumerate() {
+            let bus = &buses[usize::from(i >= 4)];
+            bus.dispatch(&feedback(1 + (i % 4) as u16, k), now);
+        }
+        let t = ticks(|| {
+            for bus in &buses {
+                bus.tick(black_box(now), black_box(0.001), &mut batch);
+            }
+        });
+        // The first 20 ticks bring the motors online and settle the loops.
+        if let Some(slot) = (k as usize).checked_sub(20).and_then(|i| out.get_mut(i)) {
+            *slot = f.cal.instructions(t);
+        }
+    }
+    for m in motors {
+        m.disable();
+    }
+}
+
+#[entry]
+fn main() -> ! {
+    timer_start();
+    let f = Figures {
+        cal: Calibration::measure(),
+    };
+    hprintln!(
+        "calibration: empty region {} timer ticks, {} ticks per 1000 instructions (3200 expected)",
+        f.cal.overhead_ticks,
+        f.cal.milliticks_per_instruction
+    );
+    hprintln!(
+        "{:<34} {:>7} {:>7} {:>7} {:>7}",
+        "instructions",
+        "min",
+        "median",
+        "max",
+        "mean"
+    );
+    let mut s = [0u32; SAMPLES];
+
+    for (n, name) in [
+        (1, "tick_speed_1"),
+        (4, "tick_speed_4"),
+        (8, "tick_speed_8"),
+    ] {
+        tick_samples(&f, &MOTORS[..n], Mode::Speed, &mut s);
+        f.row(name, &mut s, Stat::Median);
+    }
+    for (n, worst, mean) in [
+        (1, "tick_angle_1_worst", "tick_angle_1_mean"),
+        (4, "tick_angle_4_worst", "tick_angle_4_mean"),
+        (8, "tick_angle_8_worst", "tick_angle_8_mean"),
+    ] {
+        tick_samples(&f, &MOTORS[..n], Mode::Angle, &mut s);
+        let mut copy = s;
+        f.row(worst, &mut s, Stat::Max);
+        f.row(mean, &mut copy, Stat::Mean);
+    }
+
+    // Routing + parsing one frame among four motors (the last registered: the longest search).
+    let mut builder: BusBuilder<'static, 8> = BusBuilder::new();
+    for m in &MOTORS[..4] {
+        let _ = builder.register(m);
+    }
+    let bus = builder.build();
+    let mut k = 0u32;
+    let dispatch_samples = |k: &mut u32, out: &mut [u32; SAMPLES]| {
+        for slot in out.iter_mut() {
+            let frame = feedback(4, *k);
+            let now = Instant::from_micros(1_000_000 + u64::from(*k) * 1000);
+            *slot = f
+                .cal
+                .instructions(ticks(|| bus.dispatch(black_box(&frame), now)));
+            *k += 1;
+        }
+    };
+    dispatch_samples(&mut k, &mut s);
+    f.row("dispatch_4_start", &mut s, Stat::Median);
+    // 10⁶ frames at full speed (C620 no-load: 9256 rotor rpm ≈ 1264 counts per ms).
+    for n in 0..1_000_000u32 {
+        let angle = ((u64::from(n) * 1264) % 8192) as u16;
+        let a = angle.to_be_bytes();
+        let r = 9256i16.to_be_bytes();
+        if let Some(frame) = CanFrame::standard(0x204, &[a[0], a[1], r[0], r[1], 0, 0, 35, 0]) {
+            bus.dispatch(
+                &frame,
+                Instant::from_micros(2_000_000 + u64::from(n) * 1000),
+            );
+        }
+    }
+    k = 2_000_000;
+    dispatch_samples(&mut k, &mut s);
+    f.row("dispatch_4_after_1e6", &mut s, Stat::Median);
+
+    // One step of each controller, with every term in use.
+    let mut pid = Pid::new(
+        PidConfig::new(0.6, 8.0, 0.001)
+            .with_output_limit(20.0)
+            .with_integral_limit(10.0),
+    )
+    .unwrap_or_else(|_| unreachable!());
+    let mut incremental =
+        IncrementalPid::new(IncrementalPidConfig::new(18.0, 15.0, 0.0).with_output_limit(15.0))
+            .unwrap_or_else(|_| unreachable!());
+    let mut with_td = IncrementalPid::new(
+        IncrementalPidConfig::new(18.0, 15.0, 0.0)
+            .with_output_limit(15.0)
+            .with_td(200.0),
+    )
+    .unwrap_or_else(|_| unreachable!());
+    for (i, slot) in s.iter_mut().enumerate() {
+        let m = (i % 97) as f32;
+        *slot = f.cal.instructions(ticks(|| {
+            pid.update(black_box(300.0), black_box(m), black_box(0.001))
+        }));
+    }
+    f.row("pid_positional", &mut s, Stat::Median);
+    for (i, slot) in s.iter_mut().enumerate() {
+        let m = (i % 97) as f32;
+        *slot = f.cal.instructions(ticks(|| {
+            incremental.update(black_box(300.0), black_box(m), black_box(0.001))
+        }));
+    }
+    f.row("pid_incremental", &mut s, Stat::Median);
+    for (i, slot) in s.iter_mut().enumerate() {
+        let m = (i % 97) as f32;
+        *slot = f.cal.instructions(ticks(|| {
+            with_td.update(black_box(300.0), black_box(m), black_box(0.001))
+        }));
+    }
+    f.row("pid_incremental_td", &mut s, Stat::Median);
+
+    let mut dt = DeltaTime::new(Duration::from_millis(1), Duration::from_millis(10));
+    for (i, slot) in s.iter_mut().enumerate() {
+        let now = Instant::from_micros(5_000_000_000 + i as u64 * 1000 + (i as u64 % 7));
+        *slot = f.cal.instructions(ticks(|| dt.update(black_box(now))));
+    }
+    f.row("delta_time", &mut s, Stat::Median);
+
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
