@@ -162,6 +162,12 @@ impl SimBus {
         self.mcu_bus_off
     }
 
+    /// Controller frames holding a TX buffer: waiting, or on the wire.
+    fn mcu_frames_held(&self) -> usize {
+        let on_wire = matches!(self.on_wire, Some((Sender::Mcu, _, _)));
+        self.mcu_tx.len() + usize::from(on_wire)
+    }
+
     /// Counts a frame that a fault removed from the wire.
     pub fn record_lost(&mut self) {
         self.stats.lost += 1;
@@ -245,7 +251,8 @@ impl CanTransmit for McuPort<'_> {
         if self.bus.mcu_bus_off {
             return Err(SendError::BusOff);
         }
-        if self.bus.mcu_tx.len() >= self.bus.config.mcu_tx_depth {
+        // A frame on the wire still holds its TX buffer until it completes, as on the FDCAN.
+        if self.bus.mcu_frames_held() >= self.bus.config.mcu_tx_depth {
             self.bus.stats.mcu_tx_full += 1;
             return Err(SendError::Full);
         }
@@ -263,6 +270,10 @@ impl CanTransmit for McuPort<'_> {
         } else {
             BusStatus::default()
         }
+    }
+
+    fn still_queued(&self) -> u8 {
+        u8::try_from(self.bus.mcu_frames_held()).unwrap_or(u8::MAX)
     }
 }
 
@@ -420,6 +431,23 @@ mod tests {
         bus.start_next(end);
         let end2 = bus.busy_until().unwrap();
         assert_eq!(bus.complete(end2), Some((Sender::Mcu, std_frame(0x200))));
+    }
+
+    #[test]
+    fn frames_still_held_at_the_next_tick_are_reported_and_hold_buffers() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        let mut port = bus.mcu_port();
+        port.try_send(&std_frame(0x200)).unwrap();
+        port.try_send(&std_frame(0x1FF)).unwrap();
+        assert_eq!(port.still_queued(), 2);
+        bus.start_next(0); // 0x200 goes on the wire: it still holds its buffer
+        let mut port = bus.mcu_port();
+        assert_eq!(port.still_queued(), 2);
+        port.try_send(&std_frame(0x2FF)).unwrap();
+        assert_eq!(port.try_send(&std_frame(0x2FE)), Err(SendError::Full));
+        let end = bus.busy_until().unwrap();
+        bus.complete(end);
+        assert_eq!(bus.mcu_port().still_queued(), 2);
     }
 
     #[test]

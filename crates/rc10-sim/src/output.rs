@@ -73,12 +73,13 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
     );
     let _ = writeln!(
         s,
-        "rc10      rx {} (unmatched {}, rejected {}), tx {} (dropped {}), offline events {:?}",
+        "rc10      rx {} (unmatched {}, rejected {}), tx {} (dropped {}, sent late {}), offline events {:?}",
         c.rx_frames,
         c.rx_unmatched,
         c.rx_rejected,
         c.tx_frames,
         c.tx_dropped(),
+        c.tx_stale,
         result.offline_events
     );
     let _ = writeln!(
