@@ -23,9 +23,17 @@ use core::f32::consts::{PI, TAU};
 #[inline]
 pub fn constrain(value: f32, min: f32, max: f32) -> f32 {
     let (lo, hi) = if min > max { (max, min) } else { (min, max) };
-    let v = if value.is_nan() { 0.0 } else { value };
-    // `f32::max`/`min` return the non-NaN operand, so a NaN bound leaves that side open.
-    v.max(lo).min(hi)
+    let mut v = if value.is_nan() { 0.0 } else { value };
+    // Plain comparisons, not `f32::max`/`min`: those are library calls (`fmaxf`/`fminf`) on
+    // the Cortex-M4, whose FPU has no VMAXNM. A comparison with a NaN bound is false, so a
+    // NaN bound leaves that side open.
+    if v < lo {
+        v = lo;
+    }
+    if v > hi {
+        v = hi;
+    }
+    v
 }
 
 /// Clamps `value` into `[-limit, limit]` and always returns a finite number.
