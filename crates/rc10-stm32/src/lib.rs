@@ -57,8 +57,10 @@ use embassy_stm32::rcc;
 use rc10_core::can::acceptance::PlanError;
 
 /// embassy-stm32 configuration for an STM32G4 at 170 MHz from the internal 16 MHz HSI
-/// (PLL: /4 · 85 / 2), no external crystal needed, with the FDCAN kernel clock on PCLK1
-/// (170 MHz: 1 Mbit/s is 170 time quanta… divided by the prescaler embassy picks).
+/// (PLL: 16 MHz / 4 · 85 = 340 MHz VCO, / 2 = 170 MHz; voltage range 1 boost), no external
+/// crystal needed, with the FDCAN kernel clock on PCLK1 (170 MHz). embassy-stm32 derives
+/// the 1 Mbit/s bit timing from that clock in [`can::start`]. The FDCAN mux must be set:
+/// its default, HSE, is not running, and `CanConfigurator::new` would panic.
 pub fn clocks_170mhz() -> embassy_stm32::Config {
     let mut config = embassy_stm32::Config::default();
     config.rcc.hsi = true;
