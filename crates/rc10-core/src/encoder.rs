@@ -333,6 +333,79 @@ impl Encoder {
         }
     }
 
+    /// Feeds one raw reading from a device that reports every `period` exactly (DJI ESCs:
+    /// 1 ms), when the receive timestamps may be late (frames stamped when the receiver read
+    /// them, not when they arrived).
+    ///
+    /// `counts_per_period` is the rotor's mean speed over the interval in counts per period;
+    /// `gap_periods` the interval measured from the timestamps, in periods. The true interval
+    /// is a whole number `m ≥ 1` of periods (the frames in between were lost); it is searched
+    /// within ±2 of the measured gap, and the step `d + k · counts_per_rev` that a whole `m`
+    /// explains best is taken: the rotor position, not the late timestamp, decides. Where two
+    /// intervals explain the reading equally well (the rotor turns a whole number of times in
+    /// the difference: 2048 counts per period for `Δm` = 4, beyond 4096 for smaller ones), the
+    /// one nearer the measured gap wins. At low speed, where no choice in the window changes
+    /// the turn count, this is [`update_predicted`](Self::update_predicted) with
+    /// `counts_per_period · gap_periods`. Non-finite inputs fall back to the half-turn rule.
+    ///
+    /// ```
+    /// use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
+    /// let mut enc = Encoder::new(EncoderConfig::dji(GearRatio::M2006)).unwrap();
+    /// enc.update(0).unwrap();
+    /// // M2006 at full speed: 2457.6 counts per 1 ms frame. The next frame really came 1 ms
+    /// // later, but was read 1.7 ms late: the stamps say 2.7 ms.
+    /// enc.update_periodic(2458, 2457.6, 2.7).unwrap();
+    /// assert_eq!(enc.total_counts(), 2458);
+    /// ```
+    pub fn update_periodic(
+        &mut self,
+        raw: u16,
+        counts_per_period: f32,
+        gap_periods: f32,
+    ) -> Result<(), EncoderError> {
+        let n = i64::from(self.config.counts_per_rev);
+        let (Some(last), true) = (
+            self.last_raw,
+            counts_per_period.is_finite() && gap_periods.is_finite(),
+        ) else {
+            return self.update_predicted(raw, 0.0);
+        };
+        if i64::from(raw) >= n {
+            return Err(EncoderError::OutOfRange { raw });
+        }
+        let nf = n as f32;
+        let gap = gap_periods.clamp(1.0, 1.0e6);
+        // At most ±2 periods around the measured gap: the whole window moves the rotor by less
+        // than a quarter turn, so every candidate gives the same turn count.
+        if counts_per_period.abs() * 4.0 < nf * 0.25 {
+            return self.update_predicted(raw, counts_per_period * gap);
+        }
+        let d0 = wrap_counts(i64::from(raw) - i64::from(last), n);
+        let centre = libm::roundf(gap) as i64;
+        let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
+        for m in (centre - 2).max(1)..=centre + 2 {
+            let predicted = counts_per_period * m as f32;
+            let turns = libm::roundf((predicted - d0 as f32) / nf).clamp(-1.0e6, 1.0e6) as i64;
+            let step = d0 + turns * n;
+            let residual = (step as f32 - predicted).abs();
+            let distance = (m as f32 - gap).abs();
+            let better = match best {
+                None => true,
+                Some((r, d, _)) => {
+                    residual + AMBIGUOUS_COUNTS < r
+                        || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
+                }
+            };
+            if better {
+                best = Some((residual, distance, step));
+            }
+        }
+        let step = best.map_or(d0, |(_, _, step)| step);
+        self.total_counts = self.total_counts.saturating_add(step);
+        self.last_raw = Some(raw);
+        Ok(())
+    }
+
     /// Homing: declares the present position to be the output-shaft multi-turn angle
     /// `angle_deg` (rounded to the nearest rotor count). For an absolute origin the zero
     /// offset moves with it, so a later [`reset`](Self::reset) keeps the new origin. Returns
@@ -367,6 +440,10 @@ impl Encoder {
         self.total_counts = 0;
     }
 }
+
+/// Two candidate steps whose fits to a whole number of periods differ by less than this many
+/// counts (1/32 of a DJI rotor turn) are taken as equally good.
+const AMBIGUOUS_COUNTS: f32 = 256.0;
 
 /// Wraps a count difference into `[-n/2, n/2)`. `delta` is a difference of two readings
 /// below `n`, so it lies in `(-n, n)` and one correction suffices: no division (an `i64`
@@ -436,12 +513,65 @@ mod tests {
         assert_eq!(counted, truth);
     }
 
+    /// Frames every 1 ms at `counts_per_ms`, each stamped `late_ms[i]` after it arrived.
+    fn run_late_reads(gear: GearRatio, counts_per_ms: f64, late_ms: &[f64]) -> (i64, i64) {
+        let mut enc = dji(gear);
+        enc.update(0).unwrap();
+        let mut prev_stamp = 0.0f64;
+        let mut true_counts = 0.0f64;
+        for (i, late) in late_ms.iter().enumerate() {
+            let t = (i + 1) as f64;
+            true_counts = counts_per_ms * t;
+            let raw = (true_counts.round() as i64).rem_euclid(8192) as u16;
+            let stamp = (t + late).max(prev_stamp);
+            let gap = stamp - prev_stamp;
+            prev_stamp = stamp;
+            enc.update_periodic(raw, counts_per_ms as f32, gap as f32)
+                .unwrap();
+        }
+        (enc.total_counts(), true_counts.round() as i64)
+    }
+
+    #[test]
+    fn late_reads_do_not_cost_turns_at_full_speed() {
+        // Receiver delays of up to 2 ms, in bursts (frames then read back to back).
+        let late: Vec<f64> = (0..400)
+            .map(|i| match i % 10 {
+                3 => 1.7,
+                4 => 1.2,
+                7 => 2.0,
+                8 => 0.4,
+                _ => 0.05,
+            })
+            .collect();
+        for (gear, counts_per_ms) in [
+            (GearRatio::M2006, 18_000.0 / 60.0 * 8192.0 / 1000.0),
+            (GearRatio::M3508, 9_256.0 / 60.0 * 8192.0 / 1000.0),
+            (GearRatio::M2006, -18_000.0 / 60.0 * 8192.0 / 1000.0),
+        ] {
+            let (counted, truth) = run_late_reads(gear, counts_per_ms, &late);
+            assert_eq!(counted, truth, "{counts_per_ms} counts/ms");
+        }
+    }
+
+    #[test]
+    fn slow_rotor_with_late_reads_counts_exactly() {
+        let late: Vec<f64> = (0..200)
+            .map(|i| if i % 5 == 0 { 3.0 } else { 0.0 })
+            .collect();
+        let (counted, truth) = run_late_reads(GearRatio::M3508, 100.0, &late);
+        assert_eq!(counted, truth);
+    }
+
     #[test]
     fn absurd_prediction_cannot_overflow() {
         let mut enc = dji(GearRatio::DIRECT);
         enc.update(0).unwrap();
         enc.update_predicted(10, f32::MAX).unwrap();
         enc.update_predicted(20, f32::NAN).unwrap();
+        enc.update_periodic(30, f32::MAX, 1.0).unwrap();
+        enc.update_periodic(40, 2000.0, f32::INFINITY).unwrap();
+        enc.update_periodic(50, 2000.0, 1.0e30).unwrap();
         assert!(enc.total_counts() > 0);
     }
 

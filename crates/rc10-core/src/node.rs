@@ -336,6 +336,34 @@ impl TxBatch {
             .inspect_err(|_| self.overflowed += 1)
     }
 
+    /// Drops the whole frames packed at index `from` and after that a node did not declare:
+    /// beyond `frames_per_tick` of them, or on an ID outside `sends` (slot frames are left
+    /// alone). Returns how many were dropped. The bus calls this after each node's
+    /// `pack_command`, so a node can never send what registration did not check.
+    pub fn keep_declared(&mut self, from: usize, frames_per_tick: u8, sends: &IdSet) -> u32 {
+        let mut whole = 0u8;
+        let mut dropped = 0u32;
+        let mut i = from;
+        while let Some(frame) = self.frames.get(i) {
+            if self.slot_frames & (1 << i) != 0 {
+                i += 1;
+                continue;
+            }
+            whole = whole.saturating_add(1);
+            if whole > frames_per_tick || !sends.matches(frame.id()) {
+                self.frames.remove(i);
+                // Slot-frame flags above `i` move down with their frames.
+                let below = self.slot_frames & ((1u16 << i) - 1);
+                let above = (self.slot_frames >> (i + 1)) << i;
+                self.slot_frames = below | above;
+                dropped += 1;
+            } else {
+                i += 1;
+            }
+        }
+        dropped
+    }
+
     /// The frames packed so far.
     pub fn frames(&self) -> &[CanFrame] {
         &self.frames
@@ -418,6 +446,24 @@ mod tests {
         assert_eq!(b.frames().len(), 2);
         assert_eq!(b.frames()[0], mit);
         assert_eq!(b.frames()[1].data(), &[1, 2, 3, 4, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn undeclared_whole_frames_are_dropped_and_slot_frames_kept() {
+        let mut b = TxBatch::new();
+        b.write_slot(CommandSlot::new(0x200, 0).unwrap(), 1);
+        b.push(CanFrame::standard(0x301, &[1]).unwrap()).unwrap(); // declared
+        b.write_slot(CommandSlot::new(0x1FF, 0).unwrap(), 2); // a slot frame after it
+        b.push(CanFrame::standard(0x305, &[2]).unwrap()).unwrap(); // undeclared ID
+        b.push(CanFrame::standard(0x301, &[3]).unwrap()).unwrap(); // one too many
+        let sends = IdSet::one(IdFilter::standard(0x301));
+        assert_eq!(b.keep_declared(1, 1, &sends), 2);
+        let ids: Vec<u32> = b.frames().iter().map(|f| f.raw_id()).collect();
+        assert_eq!(ids, [0x200, 0x301, 0x1FF]);
+        // The slot flag moved with its frame: a later slot write still merges into it.
+        b.write_slot(CommandSlot::new(0x1FF, 1).unwrap(), 3);
+        assert_eq!(b.frames().len(), 3);
+        assert_eq!(b.frames()[2].data(), &[0, 2, 0, 3, 0, 0, 0, 0]);
     }
 
     #[test]

@@ -66,7 +66,7 @@ fn a_transport_that_keeps_failing_does_not_make_the_receiver_spin() {
         .recv_timeout(std::time::Duration::from_secs(10))
         .expect("the other task never ran: the receiver starved the executor");
     // Back-off 0, 0.1, 0.2, … ms doubling to 10 ms: about a dozen calls in 50 ms, not millions.
-    assert!((5..=40).contains(&calls), "{calls} receive calls in 50 ms");
+    assert!((2..=40).contains(&calls), "{calls} receive calls in 50 ms");
     // Every failure is still counted.
     assert!(
         overruns >= calls - 1 && overruns <= calls,

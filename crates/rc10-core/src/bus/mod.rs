@@ -43,10 +43,11 @@ use crate::can::{
     BusRates, BusStats, CanFrame, CanReceive, CanTransmit, ErrorState, ReceiveError, SendError,
     timing,
 };
-use crate::node::{CanNode, CommandSlot, MAX_FRAMES_PER_TICK, TxBatch};
+use crate::node::{CanNode, CommandSlot, IdSet, MAX_FRAMES_PER_TICK, TxBatch};
 use crate::time::{DeltaTime, Duration, Instant};
 use core::cell::RefCell;
 use core::fmt;
+use core::sync::atomic::{AtomicU8, Ordering};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
@@ -251,7 +252,15 @@ impl core::error::Error for RegisterError {}
 /// ```
 pub struct BusBuilder<'a, const N: usize> {
     nodes: heapless::Vec<&'a dyn CanNode, N>,
+    declared: heapless::Vec<Declared, N>,
     config: BusConfig,
+}
+
+/// What a node declared it sends as whole frames, kept to hold it to that every tick.
+#[derive(Debug, Clone, Copy)]
+struct Declared {
+    frames_per_tick: u8,
+    sends: IdSet,
 }
 
 impl<'a, const N: usize> BusBuilder<'a, N> {
@@ -264,6 +273,7 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
     pub const fn with_config(config: BusConfig) -> Self {
         Self {
             nodes: heapless::Vec::new(),
+            declared: heapless::Vec::new(),
             config,
         }
     }
@@ -285,6 +295,9 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
         }
         let me = self.nodes.len();
         let my_tx = mine.transmit_ids();
+        if my_tx.overflowed() {
+            return Err(RegisterError::TooManyIds); // the slot frame's ID did not fit
+        }
         if let Some(id) = mine.listen.common_id_with(&my_tx) {
             return Err(RegisterError::CommandOnFeedbackId {
                 sender: me,
@@ -337,7 +350,14 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
                 load_percent: budget.nominal_load_percent,
             });
         }
-        self.nodes.push(node).map_err(|_| RegisterError::Full)
+        self.nodes.push(node).map_err(|_| RegisterError::Full)?;
+        let declared = Declared {
+            frames_per_tick: mine.frames_per_tick,
+            sends: mine.sends,
+        };
+        // Same capacity as `nodes`, which just took the node.
+        let _ = self.declared.push(declared);
+        Ok(())
     }
 
     /// The frame budget of the nodes registered so far.
@@ -353,9 +373,11 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
     pub fn build(self) -> Bus<'a, N> {
         Bus {
             nodes: self.nodes,
+            declared: self.declared,
             config: self.config,
             stats: BusStats::new(),
             window: Mutex::new(RefCell::new(RateWindow::new())),
+            first_refused: AtomicU8::new(0),
         }
     }
 }
@@ -433,9 +455,13 @@ pub struct TransmitReport {
 /// the receiver task and anyone reading statistics.
 pub struct Bus<'a, const N: usize> {
     nodes: heapless::Vec<&'a dyn CanNode, N>,
+    declared: heapless::Vec<Declared, N>,
     config: BusConfig,
     stats: BusStats,
     window: Mutex<CriticalSectionRawMutex, RefCell<RateWindow>>,
+    /// Index (in the batch) of the first frame the transport refused last tick: this tick
+    /// starts there, so a backlog never refuses the same node every tick.
+    first_refused: AtomicU8,
 }
 
 impl<'a, const N: usize> Bus<'a, N> {
@@ -471,8 +497,13 @@ impl<'a, const N: usize> Bus<'a, N> {
         for node in &self.nodes {
             node.update(now, dt_s);
         }
-        for node in &self.nodes {
+        for (node, declared) in self.nodes.iter().zip(&self.declared) {
+            let from = out.frames().len();
             node.pack_command(out);
+            let dropped = out.keep_declared(from, declared.frames_per_tick, &declared.sends);
+            if dropped > 0 {
+                self.stats.record_tx_undeclared(dropped);
+            }
         }
         if out.overflowed() > 0 {
             self.stats.record_batch_overflow(out.overflowed());
@@ -488,9 +519,14 @@ impl<'a, const N: usize> Bus<'a, N> {
         });
     }
 
-    /// Hands the batch's frames to `tx` in order with `try_send`, counting what was queued and
-    /// what was not, and first the frames of earlier ticks still waiting
+    /// Hands the batch's frames to `tx` with `try_send`, counting what was queued and what was
+    /// not, and first the frames of earlier ticks still waiting
     /// ([`CanTransmit::still_queued`], counted in `tx_stale`).
+    ///
+    /// Frames go in packing order, except that after a tick in which the transport refused a
+    /// frame (its buffers still held frames of an earlier tick), the next tick starts with
+    /// the first refused one: a backlog delays every node in turn instead of starving the
+    /// last-packed one every tick.
     ///
     /// Bus-off is tracked here and only here: the controller is taken to be bus-off during
     /// this tick if `status()` says so *or* any `try_send` reported it, and
@@ -508,7 +544,12 @@ impl<'a, const N: usize> Bus<'a, N> {
         }
         let mut bus_off = status.state == ErrorState::BusOff;
         let mut report = TransmitReport::default();
-        for frame in batch.frames() {
+        let frames = batch.frames();
+        let start = usize::from(self.first_refused.load(Ordering::Relaxed));
+        let start = if start < frames.len() { start } else { 0 };
+        let (tail, head) = frames.split_at(start);
+        let mut first_refused = None;
+        for (i, frame) in head.iter().chain(tail).enumerate() {
             match tx.try_send(frame) {
                 Ok(()) => {
                     self.stats.record_tx(timing::unstuffed_bits(frame));
@@ -517,6 +558,7 @@ impl<'a, const N: usize> Bus<'a, N> {
                 Err(SendError::Full) => {
                     self.stats.record_tx_full();
                     report.full += 1;
+                    first_refused.get_or_insert((start + i) % frames.len());
                 }
                 Err(SendError::BusOff) => {
                     self.stats.record_tx_bus_off();
@@ -528,6 +570,10 @@ impl<'a, const N: usize> Bus<'a, N> {
         if bus_off || !batch.frames().is_empty() {
             self.stats.record_bus_off_state(bus_off);
         }
+        let next = first_refused
+            .and_then(|i| u8::try_from(i).ok())
+            .unwrap_or(0);
+        self.first_refused.store(next, Ordering::Relaxed);
         report
     }
 

@@ -713,3 +713,98 @@ fn frames_left_over_from_the_previous_tick_are_counted_stale() {
     bus.transmit(&batch, &mut tx);
     assert_eq!(bus.stats().snapshot().tx_stale, 3);
 }
+
+/// Sends one frame per tick on `id`, and optionally one it never declared.
+struct OneFrame {
+    id: u16,
+    rogue: bool,
+}
+
+impl CanNode for OneFrame {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage::NONE.sending(IdFilter::standard(self.id), 1)
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, out: &mut TxBatch) {
+        let _ = out.push(CanFrame::standard(self.id, &[1]).unwrap());
+        if self.rogue {
+            // A second frame, and on a C620's feedback ID: never declared.
+            let _ = out.push(CanFrame::standard(0x201, &[0xFF; 8]).unwrap());
+        }
+    }
+}
+
+#[test]
+fn a_backlog_delays_every_node_in_turn_instead_of_starving_the_last() {
+    let nodes = [0x301u16, 0x302, 0x303].map(|id| OneFrame { id, rogue: false });
+    let mut builder = BusBuilder::<4>::new();
+    for n in &nodes {
+        builder.register(n).unwrap();
+    }
+    let bus = builder.build();
+    let mut tx = TxQueue::<3>::new();
+    let mut batch = TxBatch::new();
+    let mut queued = std::collections::HashMap::new();
+    for _ in 0..9 {
+        bus.tick(T0, 0.001, &mut batch);
+        let before: Vec<CanFrame> = core::iter::from_fn(|| tx.pop()).collect();
+        for f in &before {
+            tx.try_send(f).unwrap(); // put them back: we only want to see what this tick adds
+        }
+        bus.transmit(&batch, &mut tx);
+        let after: Vec<CanFrame> = core::iter::from_fn(|| tx.pop()).collect();
+        for f in &after[before.len()..] {
+            *queued.entry(f.raw_id()).or_insert(0) += 1;
+        }
+        // The bus carries only two frames per tick: one stays queued (a backlog).
+        for f in after.iter().skip(2) {
+            tx.try_send(f).unwrap();
+        }
+    }
+    // Every node got its frame out on most ticks; none was refused every time.
+    for id in [0x301, 0x302, 0x303] {
+        assert!(
+            queued.get(&id).copied().unwrap_or(0) >= 5,
+            "{id:#x}: {queued:?}"
+        );
+    }
+}
+
+#[test]
+fn frames_a_node_did_not_declare_are_dropped_and_counted() {
+    let rogue = OneFrame {
+        id: 0x301,
+        rogue: true,
+    };
+    let wheel = DjiMotor::m3508(1).unwrap();
+    let mut builder = BusBuilder::<4>::new();
+    builder.register(&wheel).unwrap();
+    builder.register(&rogue).unwrap(); // its declaration (0x301 only) passes
+    let bus = builder.build();
+    let mut batch = TxBatch::new();
+    bus.tick(T0, 0.001, &mut batch);
+    let ids: Vec<u32> = batch.frames().iter().map(|f| f.raw_id()).collect();
+    assert_eq!(ids, [0x200, 0x301]); // the frame on the C620's feedback ID never goes out
+    assert_eq!(bus.stats().snapshot().tx_undeclared, 1);
+}
+
+#[test]
+fn a_slot_that_does_not_fit_the_send_set_is_an_error_not_a_blind_spot() {
+    let log = leak_log();
+    let mut p = Probe::new("p", log);
+    let mut sends = IdSet::EMPTY;
+    for i in 0..crate::node::ID_SET_CAPACITY as u16 {
+        sends = sends.with(IdFilter::standard(0x300 + i));
+    }
+    p.usage = BusUsage {
+        sends,
+        frames_per_tick: 1,
+        command_slot: CommandSlot::new(0x200, 0),
+        ..BusUsage::NONE
+    };
+    let mut b = BusBuilder::<2>::new();
+    assert_eq!(b.register(&p), Err(RegisterError::TooManyIds));
+}

@@ -228,7 +228,10 @@ impl IdFilter {
 
     /// Whether some ID passes both filters.
     pub const fn overlaps(&self, other: &Self) -> bool {
-        self.extended == other.extended && (self.id ^ other.id) & self.mask & other.mask == 0
+        // Only the ID's own bits count (11 or 29), as in `matches`.
+        let width = if self.extended { 0x1FFF_FFFF } else { 0x7FF };
+        self.extended == other.extended
+            && (self.id ^ other.id) & self.mask & other.mask & width == 0
     }
 }
 
@@ -305,6 +308,18 @@ mod tests {
         let std_filter = IdFilter::standard(0x201);
         assert!(!std_filter.matches(CanFrame::extended(0x201, &[]).unwrap().id()));
         assert!(!IdFilter::extended(0x201).overlaps(&std_filter));
+    }
+
+    #[test]
+    fn bits_beyond_the_id_width_do_not_hide_an_overlap() {
+        let a = IdFilter::standard(0x201);
+        let b = IdFilter {
+            extended: false,
+            id: 0x1201, // a stray bit above the 11-bit ID
+            mask: 0xFFFF,
+        };
+        assert!(b.matches(CanFrame::standard(0x201, &[]).unwrap().id()));
+        assert!(a.overlaps(&b) && b.overlaps(&a));
     }
 
     #[test]

@@ -25,6 +25,7 @@ pub struct BusStats {
     tx_stale: AtomicU32,
     tx_bus_off: AtomicU32,
     tx_batch_overflow: AtomicU32,
+    tx_undeclared: AtomicU32,
     bus_off_events: AtomicU32,
     ticks: AtomicU32,
     ticks_skipped: AtomicU32,
@@ -56,6 +57,7 @@ impl BusStats {
             tx_stale: AtomicU32::new(0),
             tx_bus_off: AtomicU32::new(0),
             tx_batch_overflow: AtomicU32::new(0),
+            tx_undeclared: AtomicU32::new(0),
             bus_off_events: AtomicU32::new(0),
             ticks: AtomicU32::new(0),
             ticks_skipped: AtomicU32::new(0),
@@ -95,6 +97,9 @@ impl BusStats {
     pub(crate) fn record_batch_overflow(&self, n: u32) {
         bump!(self.tx_batch_overflow, n);
     }
+    pub(crate) fn record_tx_undeclared(&self, n: u32) {
+        bump!(self.tx_undeclared, n);
+    }
     pub(crate) fn record_tick(&self) {
         bump!(self.ticks);
     }
@@ -131,6 +136,7 @@ impl BusStats {
             tx_stale: l(&self.tx_stale),
             tx_bus_off: l(&self.tx_bus_off),
             tx_batch_overflow: l(&self.tx_batch_overflow),
+            tx_undeclared: l(&self.tx_undeclared),
             bus_off_events: l(&self.bus_off_events),
             ticks: l(&self.ticks),
             ticks_skipped: l(&self.ticks_skipped),
@@ -169,6 +175,9 @@ pub struct BusCounters {
     pub tx_bus_off: u32,
     /// Frames the devices tried to pack beyond the per-tick batch capacity.
     pub tx_batch_overflow: u32,
+    /// Whole frames a node packed beyond what its `BusUsage` declared (too many, or on an
+    /// undeclared ID): dropped, never sent.
+    pub tx_undeclared: u32,
     /// Times the controller entered bus-off.
     pub bus_off_events: u32,
     /// Scheduler ticks run.
@@ -202,6 +211,7 @@ impl BusCounters {
             tx_batch_overflow: self
                 .tx_batch_overflow
                 .wrapping_sub(earlier.tx_batch_overflow),
+            tx_undeclared: self.tx_undeclared.wrapping_sub(earlier.tx_undeclared),
             bus_off_events: self.bus_off_events.wrapping_sub(earlier.bus_off_events),
             ticks: self.ticks.wrapping_sub(earlier.ticks),
             ticks_skipped: self.ticks_skipped.wrapping_sub(earlier.ticks_skipped),
@@ -230,7 +240,8 @@ impl BusCounters {
 pub struct BusRates {
     /// Frames received per second.
     pub rx_frames_per_s: f32,
-    /// Frames sent per second.
+    /// Frames queued for transmission per second (queued frames normally go out within the
+    /// period; see `tx_stale` for those that did not).
     pub tx_frames_per_s: f32,
     /// Frames dropped on the TX side per second.
     pub tx_dropped_per_s: f32,

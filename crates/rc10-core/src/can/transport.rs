@@ -89,7 +89,7 @@ pub struct BusStatus {
     pub protocol_error: bool,
 }
 
-/// A received frame and when it arrived.
+/// A received frame and its timestamp (see the module docs: possibly the time it was read).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Received {

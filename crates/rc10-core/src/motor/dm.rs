@@ -263,7 +263,8 @@ impl DmConfig {
 pub enum DmError {
     /// The CAN ID or master ID is above 0x7FF, or they are equal.
     InvalidId,
-    /// A range or gain is not finite and positive (gains: not within the protocol's range).
+    /// A range or gain is not finite and positive (gains: not within the protocol's range), or
+    /// the position range is below ±π (angle targets need a whole turn of it).
     InvalidLimit,
 }
 
@@ -339,7 +340,10 @@ impl DmMotor {
         const fn positive(x: f32) -> bool {
             x.is_finite() && x > 0.0
         }
+        // Angle targets need a whole turn of the position field (p_max ≥ π) to always have an
+        // equivalent inside the range.
         if !positive(l.p_max_rad)
+            || l.p_max_rad < core::f32::consts::PI
             || !positive(l.v_max_rad_s)
             || !positive(l.t_max_nm)
             || !ok(config.speed_kd, KD_MAX)
@@ -555,7 +559,9 @@ impl CanNode for DmMotor {
             } else {
                 MitCommand::ZERO_TORQUE
             };
-            s.torque_ff_nm = mit.torque_nm;
+            // What the packed field carries: clamped to ±t_max.
+            let t_max = self.config.limits.t_max_nm;
+            s.torque_ff_nm = crate::math::constrain(mit.torque_nm, -t_max, t_max);
             s.out = if let Some(special) = s.pending.take() {
                 special.bytes()
             } else if self.config.auto_enable
@@ -604,11 +610,19 @@ impl Motor for DmMotor {
         if !angle_deg.is_finite() {
             return Err(TargetError::NotFinite);
         }
-        let (low, high) = self.total_angle_range_deg();
-        if angle_deg < low || angle_deg > high {
-            return Err(TargetError::OutOfRange);
-        }
-        self.set(ControlMode::TotalAngle, angle_deg)
+        let p_max = self.config.limits.p_max_rad;
+        // Checked and set under one lock, so homing cannot move the range in between.
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            let offset_deg = rad_to_deg(s.frame_offset_rad(p_max));
+            let half_range_deg = rad_to_deg(p_max);
+            if (angle_deg - offset_deg).abs() > half_range_deg {
+                return Err(TargetError::OutOfRange);
+            }
+            s.mode = ControlMode::TotalAngle;
+            s.target = angle_deg;
+            Ok(())
+        })
     }
 
     /// MIT with zero gains and this feed-forward torque (mode [`ControlMode::Torque`]).
@@ -887,6 +901,9 @@ mod tests {
         let mut cfg = DmConfig::new(0x11);
         cfg.position_kp = 600.0;
         assert_eq!(DmMotor::new(1, cfg).unwrap_err(), DmError::InvalidLimit);
+        let mut short = DmConfig::new(0x11);
+        short.limits.p_max_rad = 3.0; // below π: no equivalent angle inside for some targets
+        assert_eq!(DmMotor::new(1, short).unwrap_err(), DmError::InvalidLimit);
         let m = DmMotor::new(1, DmConfig::new(0x11)).unwrap();
         assert_eq!(m.set_target_current(1.0), Err(TargetError::Unsupported));
     }

@@ -92,7 +92,8 @@ impl core::error::Error for TargetError {}
 /// Everything an application may want to read about a motor, from one consistent moment.
 ///
 /// Every field means the same on every device. A quantity the device does not report, or has
-/// not reported yet (no feedback since start), is `None`, never a made-up zero.
+/// not reported yet (no feedback since start), is `None`, never a made-up zero; the one
+/// exception is `speed_rpm`, 0 until the first frame (`last_feedback` is `None` then).
 ///
 /// `command` is in the unit the device is commanded in:
 ///
@@ -101,7 +102,7 @@ impl core::error::Error for TargetError {}
 /// | DJI M3508 / M2006 / GM6020 in current mode | amps |
 /// | DJI GM6020 in voltage mode | volts |
 /// | VESC current or brake (brake negative) | amps |
-/// | VESC duty, eRPM or position (the VESC runs the loop) | 0 |
+/// | VESC duty, eRPM or position (the VESC runs the loop: no current is commanded) | 0 |
 /// | Damiao MIT | N·m of feed-forward torque (the motor adds its kp/kd terms) |
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -110,7 +111,8 @@ pub struct MotorState {
     pub online: bool,
     /// Current control mode.
     pub mode: ControlMode,
-    /// The active target in the mode's unit (amps, N·m, volts, rpm or degrees).
+    /// The active target in the mode's unit (amps, N·m, volts, rpm or degrees; a DJI motor
+    /// reports an angle-mode target wrapped into [0, 360), the others as given).
     pub target: f32,
     /// Output-shaft speed in rpm (0 before the first feedback: see `last_feedback`).
     pub speed_rpm: f32,

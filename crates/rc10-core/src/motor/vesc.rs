@@ -213,6 +213,9 @@ pub enum VescError {
     ZeroPolePairs,
     /// A limit is NaN or negative.
     InvalidLimit,
+    /// The status set lacks STATUS_1, the packet that keeps the motor online: it would never
+    /// be driven.
+    NoStatus1,
 }
 
 impl fmt::Display for VescError {
@@ -220,6 +223,7 @@ impl fmt::Display for VescError {
         f.write_str(match self {
             Self::ZeroPolePairs => "VESC pole pairs must be at least 1",
             Self::InvalidLimit => "VESC limit is NaN or negative",
+            Self::NoStatus1 => "VESC status packets must include STATUS_1",
         })
     }
 }
@@ -291,6 +295,9 @@ impl VescMotor {
             && !(kt.is_finite() && kt > 0.0)
         {
             return Err(VescError::InvalidLimit);
+        }
+        if !config.status_packets.contains(VescStatusSet::STATUS_1) {
+            return Err(VescError::NoStatus1);
         }
         Ok(Self {
             vesc_id,
@@ -536,6 +543,8 @@ impl Motor for VescMotor {
         self.set(ControlMode::Torque, torque_nm, None, None)
     }
 
+    /// Limits current, brake and torque commands. In speed, duty and position modes the VESC
+    /// runs its own loop and the current limits set in VESC Tool apply instead.
     fn set_current_limit_amps(&self, amps: f32) -> Result<(), TargetError> {
         if amps.is_nan() {
             return Err(TargetError::NotFinite);
@@ -818,6 +827,9 @@ mod tests {
         let mut bad = VescConfig::new(7);
         bad.torque_constant_nm_per_amp = Some(0.0);
         assert_eq!(VescMotor::new(3, bad).unwrap_err(), VescError::InvalidLimit);
+        let mut silent = VescConfig::new(7);
+        silent.status_packets = VescStatusSet::STATUS_4;
+        assert_eq!(VescMotor::new(3, silent).unwrap_err(), VescError::NoStatus1);
     }
 
     #[test]

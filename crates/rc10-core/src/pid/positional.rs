@@ -183,7 +183,12 @@ impl Pid {
     pub fn set_config(&mut self, config: PidConfig) -> Result<(), PidConfigError> {
         config.validate()?;
         if config.d_cutoff_hz != self.config.d_cutoff_hz {
+            // New cutoff, same present output: no bump in the D term.
+            let present = self.d_filter.output();
             self.d_filter = LowPass::new(config.d_cutoff_hz);
+            if let Some(d) = present {
+                self.d_filter.reset_to(d);
+            }
         }
         self.config = config;
         self.integral = saturate(self.integral, config.integral_limit);
@@ -238,8 +243,10 @@ impl Pid {
         } else {
             c.output_limit
         };
-        let i_limit = if out_limit < c.integral_limit {
-            out_limit
+        // The integral never needs to exceed what, with the feed-forward, reaches the limit.
+        let i_reach = out_limit + feed_forward.abs();
+        let i_limit = if i_reach < c.integral_limit {
+            i_reach
         } else {
             c.integral_limit
         };

@@ -40,6 +40,10 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 /// DJI ESCs send feedback every millisecond.
 const FEEDBACK_PERIOD_US: u64 = 1000;
 
+/// How far after the last tick a feedback timestamp is still trusted for timing.
+const TRUST_AHEAD: crate::time::Duration =
+    crate::time::Duration::from_micros(2 * FEEDBACK_PERIOD_US);
+
 /// Which DJI motor and ESC, and for the GM6020 which command mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -277,6 +281,8 @@ struct DjiState {
     pending_speed: Option<PidConfig>,
     pending_angle: Option<PidConfig>,
     pending_home_deg: Option<f32>,
+    /// The time of the last tick: feedback stamped well after it is not trusted for timing.
+    last_tick: Option<Instant>,
 }
 
 /// A DJI motor on a CAN bus: [`CanNode`] for the scheduler, [`Motor`] for the application.
@@ -351,6 +357,7 @@ impl DjiMotor {
                 pending_speed: None,
                 pending_angle: None,
                 pending_home_deg: None,
+                last_tick: None,
             })),
         })
     }
@@ -518,31 +525,40 @@ impl DjiMotor {
         if raw_angle >= DJI_COUNTS_PER_REV {
             return Err(FrameError::OutOfRange);
         }
-        let predicted_counts = if s.awaiting_return {
+        if s.awaiting_return {
             if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
                 s.encoder.reset();
             }
             s.awaiting_return = false;
             // Back from an outage: no trustworthy speed history; the return policy applies.
-            0.0
+            s.encoder
+                .update(raw_angle)
+                .map_err(|_| FrameError::OutOfRange)?;
         } else {
-            // Rotor counts turned since the previous frame: mean reported rotor speed times the
-            // time between the frames (at least one 1 kHz period: frames read back to back
-            // were still sent a period apart). Keeps multi-turn counting exact through lost
-            // frames at full speed (see `Encoder::update_predicted`).
-            let gap_us = match s.liveness.last_feedback() {
-                Some(prev) if now > prev => (now - prev).as_micros().max(FEEDBACK_PERIOD_US),
-                _ => FEEDBACK_PERIOD_US,
+            // Multi-turn counting that survives lost frames at full speed: the ESC sends every
+            // 1 ms, so the frames were a whole number of periods apart; the mean reported rotor
+            // speed says how far the rotor went in each candidate interval, and the encoder
+            // takes the one the reading fits (see `Encoder::update_periodic`). The timestamps
+            // only centre the search, as they may be read late. A stamp more than two periods
+            // after the last tick is not trusted at all (a bogus or far-future stamp): the
+            // interval is then taken as one period.
+            let trusted = s.last_tick.is_none_or(|tick| now <= tick + TRUST_AHEAD);
+            let gap_periods = match s.liveness.last_feedback() {
+                Some(prev) if trusted && now > prev => {
+                    // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
+                    u32::try_from((now - prev).as_micros()).unwrap_or(u32::MAX) as f32
+                        * (1.0 / FEEDBACK_PERIOD_US as f32)
+                }
+                _ => 1.0,
             };
-            // Gaps beyond 2^32 µs (71 min) saturate: the offline timeout is long past anyway.
-            let gap_us = u32::try_from(gap_us).unwrap_or(u32::MAX) as f32;
             let mean_rotor_rpm = (f32::from(s.rotor_rpm) + f32::from(rotor_rpm)) * 0.5;
-            // rpm · µs · 8192 counts/turn / (60 s/min · 10⁶ µs/s)
-            mean_rotor_rpm * gap_us * (f32::from(DJI_COUNTS_PER_REV) / 60.0e6)
-        };
-        s.encoder
-            .update_predicted(raw_angle, predicted_counts)
-            .map_err(|_| FrameError::OutOfRange)?;
+            // rpm · 8192 counts/turn · 1000 µs / (60 s/min · 10⁶ µs/s)
+            let counts_per_period = mean_rotor_rpm
+                * (f32::from(DJI_COUNTS_PER_REV) * FEEDBACK_PERIOD_US as f32 / 60.0e6);
+            s.encoder
+                .update_periodic(raw_angle, counts_per_period, gap_periods)
+                .map_err(|_| FrameError::OutOfRange)?;
+        }
         s.rotor_rpm = rotor_rpm;
         s.speed_rpm = f32::from(rotor_rpm) / self.model.gear().as_f32();
         let (raw_fs, unit_fs) = self.model.raw_full_scale();
@@ -581,6 +597,7 @@ impl CanNode for DjiMotor {
         let health = self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
+            s.last_tick = Some(now);
             // Requests recorded by the setters since the last tick (validated there).
             if let Some(speed) = s.pending_speed.take() {
                 let _ = s.cascade.set_speed_config(speed);

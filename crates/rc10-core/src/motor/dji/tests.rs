@@ -701,3 +701,60 @@ fn state_reports_none_for_what_has_not_been_measured() {
     online(&w);
     assert_eq!(w.state().temperature_c, None);
 }
+
+#[test]
+fn m2006_total_angle_survives_frames_read_late() {
+    // Full speed (2457.6 counts per 1 ms frame); the receiver is held up now and then and
+    // reads frames up to 1.7 ms late (stamped when read). Ticks run every 1 ms meanwhile.
+    let m = DjiMotor::m2006(1).unwrap();
+    let counts_per_ms = 18_000.0f64 / 60.0 * 8192.0 / 1000.0;
+    let mut last_stamp_us = 0u64;
+    for k in 1..=500u64 {
+        let late_us = [0, 0, 1700, 900, 0, 300, 0, 0, 1200, 0][(k % 10) as usize];
+        let stamp_us = (k * 1000 + late_us).max(last_stamp_us);
+        last_stamp_us = stamp_us;
+        tick(&m, T0 + Duration::from_micros(k * 1000));
+        let true_counts = (counts_per_ms * k as f64).round() as i64;
+        let raw = true_counts.rem_euclid(8192) as u16;
+        m.update_feedback(
+            &fb(0x201, raw, 18_000, 0, 0),
+            T0 + Duration::from_micros(stamp_us),
+        )
+        .unwrap();
+        let first = counts_per_ms.round() as i64;
+        let expect_deg = (true_counts - first) as f64 * 360.0 / 8192.0 / 36.0;
+        let got = f64::from(m.total_angle_deg().unwrap());
+        assert!(
+            (got - expect_deg).abs() < 0.05,
+            "frame {k}: {got} vs {expect_deg}"
+        );
+    }
+}
+
+#[test]
+fn a_far_future_stamp_does_not_corrupt_the_total_angle() {
+    // M3508 at full speed; one frame is stamped an hour ahead. Its timing is not trusted
+    // (taken as one period), so counting goes on exactly.
+    let m = DjiMotor::m3508(1).unwrap();
+    let counts_per_ms = 9_256.0f64 / 60.0 * 8192.0 / 1000.0;
+    for k in 1..=100u64 {
+        let now = T0 + Duration::from_millis(k);
+        tick(&m, now);
+        let true_counts = (counts_per_ms * k as f64).round() as i64;
+        let stamp = if k == 50 {
+            now + Duration::from_secs(3600)
+        } else {
+            now
+        };
+        m.update_feedback(
+            &fb(0x201, true_counts.rem_euclid(8192) as u16, 9256, 0, 30),
+            stamp,
+        )
+        .unwrap();
+    }
+    let first = counts_per_ms.round() as i64;
+    let true_counts = (counts_per_ms * 100.0).round() as i64;
+    let expect_deg = (true_counts - first) as f64 * 360.0 * 187.0 / (8192.0 * 3591.0);
+    let got = f64::from(m.total_angle_deg().unwrap());
+    assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
+}
