@@ -758,3 +758,24 @@ fn a_far_future_stamp_does_not_corrupt_the_total_angle() {
     let got = f64::from(m.total_angle_deg().unwrap());
     assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
 }
+
+#[test]
+fn lowered_gm6020_voltage_limit_is_what_the_speed_loop_winds_against() {
+    // Limit 3 V (3750 counts at 30000 ↔ 24 V); a stalled gimbal asked for a small speed.
+    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    m.set_voltage_limit_volts(3.0).unwrap();
+    m.set_target_rpm(2.0).unwrap();
+    for k in 0..3000u64 {
+        let now = T0 + Duration::from_micros(k * 500);
+        m.update_feedback(&fb(0x205, 0, 0, 0, 30), now).unwrap();
+        assert!(slot0(&tick(&m, now)) <= 3750);
+    }
+    assert!(m.speed_loop_terms().i <= 3.0 + 1e-4);
+    // Limit lifted: the command continues from about 3 V instead of jumping to the 20 V the
+    // loop would have wound up to against its own limit.
+    m.set_voltage_limit_volts(f32::INFINITY).unwrap();
+    let now = T0 + Duration::from_millis(1600);
+    m.update_feedback(&fb(0x205, 0, 0, 0, 30), now).unwrap();
+    let raw = slot0(&tick(&m, now));
+    assert!(raw < 3750 + 300, "raw {raw} after the limit was lifted");
+}
