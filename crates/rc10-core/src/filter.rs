@@ -61,7 +61,7 @@ impl LowPass {
                 // denom == 0 only for a pass-through filter called with dt = 0.
                 let alpha = if denom > 0.0 { dt / denom } else { 1.0 };
                 // Weighted form: never overflows for finite inputs, unlike `y + a·(x - y)`.
-                crate::math::saturate((1.0 - alpha) * y + alpha * input, f32::INFINITY)
+                crate::math::finite((1.0 - alpha) * y + alpha * input)
             }
         };
         self.output = Some(y);

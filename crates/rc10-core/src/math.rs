@@ -57,6 +57,28 @@ pub fn saturate(value: f32, limit: f32) -> f32 {
     constrain(value, -lim, lim)
 }
 
+/// `value` if finite; `±f32::MAX` for `±inf`; `0.0` for NaN. The same as
+/// `saturate(value, f32::INFINITY)`, in a few instructions.
+///
+/// ```
+/// use rc10_core::math::finite;
+/// assert_eq!(finite(1.5), 1.5);
+/// assert_eq!(finite(f32::NEG_INFINITY), -f32::MAX);
+/// assert_eq!(finite(f32::NAN), 0.0);
+/// ```
+#[inline]
+pub fn finite(value: f32) -> f32 {
+    if value.is_finite() {
+        value
+    } else if value.is_nan() {
+        0.0
+    } else if value > 0.0 {
+        f32::MAX
+    } else {
+        -f32::MAX
+    }
+}
+
 /// Converts degrees to radians.
 #[inline]
 pub const fn deg_to_rad(angle_deg: f32) -> f32 {

@@ -5,7 +5,7 @@ use super::{
     ErrorMode, PidConfigError, PidTerms, TrackingDifferentiator, check_deadband, check_gains,
     check_limit,
 };
-use crate::math::saturate;
+use crate::math::{finite, saturate};
 
 /// Configuration of an [`IncrementalPid`]; chainable `const` setters like
 /// [`PidConfig`](super::PidConfig).
@@ -177,9 +177,9 @@ impl IncrementalPid {
 
         let (p, i, d) = if dt_ok && e.abs() > c.deadband {
             (
-                saturate(c.kp * (e - e1), f32::INFINITY),
-                saturate(c.ki * e * dt_s, f32::INFINITY),
-                saturate(c.kd * (e - 2.0 * e1 + e2) / dt_s, f32::INFINITY),
+                finite(c.kp * (e - e1)),
+                finite(c.ki * e * dt_s),
+                finite(c.kd * (e - 2.0 * e1 + e2) / dt_s),
             )
         } else {
             (0.0, 0.0, 0.0)

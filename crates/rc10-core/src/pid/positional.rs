@@ -3,7 +3,7 @@
 
 use super::{ErrorMode, PidConfigError, PidTerms, check_deadband, check_gains, check_limit};
 use crate::filter::LowPass;
-use crate::math::saturate;
+use crate::math::{finite, saturate};
 
 /// Configuration of a positional [`Pid`]. Build it with [`PidConfig::new`] and the chainable
 /// `with_*` setters (all `const`, so configurations can be constants).
@@ -258,14 +258,14 @@ impl Pid {
         };
         let dt_ok = dt_s.is_finite() && dt_s > 0.0;
 
-        let p = saturate(c.kp * error, f32::INFINITY);
+        let p = finite(c.kp * error);
 
         // With kd = 0 the D path is skipped entirely (no divide, no filter).
         let d = match self.prev_measurement {
             _ if c.kd == 0.0 => 0.0,
             Some(prev) if dt_ok => {
                 let change = c.error_mode.diff(measurement, prev);
-                let raw_d = saturate(-c.kd * change / dt_s, f32::INFINITY);
+                let raw_d = finite(-c.kd * change / dt_s);
                 if self.d_filter.output().is_none() {
                     // Start the filter from "no derivative", so the first sample after a
                     // reset is smoothed like every other one instead of passing straight

@@ -502,8 +502,10 @@ impl DjiMotor {
             raw_fs
         };
         let raw = saturate(command * (raw_fs / unit_fs), raw_limit);
-        // |raw| ≤ 30000 < i16::MAX, and saturate maps NaN to 0.
-        libm::roundf(raw) as i16
+        // |raw| ≤ 30000 < i16::MAX, and saturate maps NaN to 0. Rounded half away from zero
+        // by hand: `roundf` is a library call on the Cortex-M4.
+        let half = if raw < 0.0 { -0.5 } else { 0.5 };
+        (raw + half) as i16
     }
 
     fn set(&self, mode: ControlMode, target: f32) -> Result<(), TargetError> {
@@ -594,18 +596,23 @@ impl CanNode for DjiMotor {
     }
 
     fn update(&self, now: Instant, dt_s: f32) {
-        let health = self.config.health;
+        let health = &self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
             s.last_tick = Some(now);
             // Requests recorded by the setters since the last tick (validated there).
-            if let Some(speed) = s.pending_speed.take() {
+            // `is_some` first: taking a large `Option` copies it even when it is `None`.
+            if s.pending_speed.is_some()
+                && let Some(speed) = s.pending_speed.take()
+            {
                 let _ = s.cascade.set_speed_config(speed);
             }
-            if let Some(angle) = s.pending_angle.take() {
+            if s.pending_angle.is_some()
+                && let Some(angle) = s.pending_angle.take()
+            {
                 let _ = s.cascade.set_angle_config(angle);
             }
-            if s.liveness.check(&health, now) {
+            if s.liveness.check(health, now) {
                 s.awaiting_return = true;
                 s.cascade.reset();
             }
