@@ -13,9 +13,10 @@
 //!   could not carry a period's commands (congestion, or no node acknowledging).
 //! - **Non-blocking send.** `CanTx::write` waits for a free buffer; [`FdcanTx::try_send`]
 //!   polls it once (`embassy_futures::poll_once`): queued, or `Full`.
-//! - **Timestamps.** The driver's `Envelope::ts` is derived from the FDCAN timestamp counter
-//!   at *read* time and can underflow right after boot; the timestamp counter is switched off
-//!   here and frames are stamped with embassy-time when the receiver reads them.
+//! - **Timestamps.** The driver's `Envelope::ts` is not the hardware reception time (it is
+//!   derived at read time, with a tick length that is not the counter's); it is not used.
+//!   Frames are stamped with embassy-time when the receiver reads them: up to the receiver's
+//!   latency late, which rc10-core's consumers allow for.
 //! - **Status in one place.** `PSR` clears its last-error code on read; only
 //!   [`FdcanTx::status`] reads it (once per tick), and reports bus-off, error-passive and a
 //!   protocol error seen since the last read. (The driver's own receive path also reads it
@@ -29,9 +30,9 @@
 
 use crate::status;
 use core::cell::Cell;
-use core::task::Poll;
-use embassy_futures::poll_once;
-use embassy_stm32::can::config::{GlobalFilter, TimestampSource, TxBufferMode};
+use core::future::Future;
+use core::task::{Context, Poll, Waker};
+use embassy_stm32::can::config::{GlobalFilter, TxBufferMode};
 use embassy_stm32::can::filter::{
     Action, EXTENDED_FILTER_MAX, ExtendedFilter, FilterType, STANDARD_FILTER_MAX, StandardFilter,
 };
@@ -78,9 +79,11 @@ impl Instance {
 }
 
 /// Configures a FDCAN for rc10 and starts it in normal mode: classic CAN at `bitrate_bps`,
-/// TX FIFO mode, automatic bus-off recovery, the timestamp counter off, the acceptance
-/// filters of `plan` (everything else rejected in hardware). Returns the two halves for the
-/// scheduler and receiver tasks.
+/// TX FIFO mode, automatic bus-off recovery, the acceptance filters of `plan` (everything
+/// else rejected in hardware). Returns the two halves for the scheduler and receiver tasks.
+///
+/// `instance` must name the peripheral the configurator was made from: the transport reads
+/// that FDCAN's status, message-lost and pending-buffer registers.
 ///
 /// The FDCAN kernel clock must be configured (`config.rcc.mux.fdcansel`, e.g. PCLK1) before
 /// `CanConfigurator::new`, which otherwise panics at run time (its default source is HSE).
@@ -99,7 +102,6 @@ pub fn start(
     let config = configurator
         .config()
         .set_tx_buffer_mode(TxBufferMode::Fifo)
-        .set_timestamp_source(TimestampSource::None)
         .set_automatic_bus_off_recovery(true)
         .set_global_filter(GlobalFilter::reject_all());
     configurator.set_config(config);
@@ -189,7 +191,10 @@ impl CanTransmit for FdcanTx {
         let Some(out) = to_hal(frame) else {
             return Err(SendError::Full); // unreachable: every CanFrame is a classic frame
         };
-        match poll_once(self.tx.write(&out)) {
+        // Polled once with a no-op waker: the driver would otherwise keep the scheduler's
+        // waker and wake the control task on every FDCAN interrupt.
+        let write = core::pin::pin!(self.tx.write(&out));
+        match write.poll(&mut Context::from_waker(Waker::noop())) {
             // In FIFO mode the driver never evicts a pending frame, so `Some` cannot occur.
             Poll::Ready(_) => Ok(()),
             Poll::Pending => Err(SendError::Full),
@@ -269,7 +274,8 @@ impl CanReceive for FdcanRx {
     }
 }
 
-/// rc10-core's frame as embassy-stm32's.
+/// rc10-core's frame as embassy-stm32's. (embassy-stm32 0.6 sends a remote frame with a
+/// non-zero DLC as a data frame; rc10's own nodes send no remote frames.)
 pub fn to_hal(frame: &CanFrame) -> Option<Frame> {
     if frame.is_remote() {
         Frame::new_remote(frame.id(), frame.dlc()).ok()

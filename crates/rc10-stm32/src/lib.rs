@@ -9,16 +9,18 @@
 //! # A board in a few lines
 //!
 //! ```ignore
-//! // Clocks: 170 MHz from HSI + PLL, FDCAN kernel clock from PCLK1.
-//! let p = embassy_stm32::init(rc10_stm32::clocks_170mhz());
+//! // Clocks: 170 MHz from the crystal + PLL, FDCAN kernel clock from PCLK1.
+//! let p = embassy_stm32::init(rc10_stm32::clocks_170mhz(Crystal::Mhz24));
+//! // The control loop's executor: an InterruptExecutor at a high priority (see below).
+//! let control: SendSpawner = start_control_executor();
 //! // Motors are statics; register them, freeze the bus, plan the filters from it.
 //! let mut builder = BusBuilder::with_config(BusConfig::DEFAULT.with_tx_depth(rc10_stm32::can::TX_BUFFERS));
 //! builder.register(&WHEEL_1)?;
 //! let bus: &'static G4Bus = BUS.init(builder.build());
 //! let plan = rc10_stm32::filter_plan(bus)?;
 //! let (tx, rx) = rc10_stm32::can::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs), Instance::Fdcan1, &plan, 1_000_000);
-//! spawner.spawn(scheduler_task(bus, tx)?);
-//! spawner.spawn(receiver_task(bus, rx)?);
+//! control.spawn(scheduler_task(bus, tx)?);
+//! control.spawn(receiver_task(bus, rx)?);
 //! ```
 //!
 //! The firmware examples in `examples/stm32g474/` are complete, commented versions.
@@ -56,17 +58,44 @@ pub use rc10_core;
 use embassy_stm32::rcc;
 use rc10_core::can::acceptance::PlanError;
 
-/// embassy-stm32 configuration for an STM32G4 at 170 MHz from the internal 16 MHz HSI
-/// (PLL: 16 MHz / 4 · 85 = 340 MHz VCO, / 2 = 170 MHz; voltage range 1 boost), no external
-/// crystal needed, with the FDCAN kernel clock on PCLK1 (170 MHz). embassy-stm32 derives
-/// the 1 Mbit/s bit timing from that clock in [`can::start`]. The FDCAN mux must be set:
-/// its default, HSE, is not running, and `CanConfigurator::new` would panic.
-pub fn clocks_170mhz() -> embassy_stm32::Config {
+/// The crystal on the board (HSE), for [`clocks_170mhz`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Crystal {
+    /// 8 MHz.
+    Mhz8,
+    /// 12 MHz.
+    Mhz12,
+    /// 16 MHz.
+    Mhz16,
+    /// 24 MHz (NUCLEO-G474RE).
+    Mhz24,
+}
+
+/// embassy-stm32 configuration for an STM32G4 at 170 MHz from the board's crystal (PLL input
+/// 4 MHz · 85 = 340 MHz VCO, / 2 = 170 MHz; voltage range 1 boost), with the FDCAN kernel
+/// clock on PCLK1 (170 MHz; embassy-stm32 derives the 1 Mbit/s bit timing from it in
+/// [`can::start`]).
+///
+/// Why a crystal: CAN at 1 Mbit/s tolerates only a few tenths of a percent of clock error
+/// between nodes, and the internal HSI is specified to about ±1 %: fine on the bench, out of
+/// tolerance when warm or cold. Why the FDCAN mux is set: its default, HSE as a direct
+/// source, is easy to leave unconfigured, and `CanConfigurator::new` then panics.
+pub fn clocks_170mhz(crystal: Crystal) -> embassy_stm32::Config {
+    let (mhz, prediv) = match crystal {
+        Crystal::Mhz8 => (8, rcc::PllPreDiv::DIV2),
+        Crystal::Mhz12 => (12, rcc::PllPreDiv::DIV3),
+        Crystal::Mhz16 => (16, rcc::PllPreDiv::DIV4),
+        Crystal::Mhz24 => (24, rcc::PllPreDiv::DIV6),
+    };
     let mut config = embassy_stm32::Config::default();
-    config.rcc.hsi = true;
+    config.rcc.hse = Some(rcc::Hse {
+        freq: embassy_stm32::time::Hertz::mhz(mhz),
+        mode: rcc::HseMode::Oscillator,
+    });
     config.rcc.pll = Some(rcc::Pll {
-        source: rcc::PllSource::HSI,
-        prediv: rcc::PllPreDiv::DIV4,
+        source: rcc::PllSource::HSE,
+        prediv,
         mul: rcc::PllMul::MUL85,
         divp: None,
         divq: None,

@@ -3,8 +3,10 @@
 //! [`Shared`] that control tasks read with its failsafe signal.
 
 use embassy_stm32::exti::ExtiInput;
+use embassy_stm32::gpio::Pull;
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, DataBits, Parity, RingBufferedUartRx, StopBits};
+use embassy_time::Duration;
 use rc10_core::remote::Shared;
 use rc10_core::remote::dbus::DbusReceiver;
 use rc10_core::remote::ppm::PpmReceiver;
@@ -21,8 +23,16 @@ pub fn dbus_config(inverted: bool) -> usart::Config {
     config.parity = Parity::ParityEven;
     config.stop_bits = StopBits::STOP1;
     config.invert_rx = inverted;
+    // An unplugged receiver leaves the pin floating: pull it to the idle level (low on the
+    // inverted line, high behind an inverter) so noise is not read as bytes.
+    config.rx_pull = if inverted { Pull::Down } else { Pull::Up };
     config
 }
+
+/// One DBUS byte on the wire: 11 bits (start, 8 data, parity, stop) at 100 kbaud, in µs.
+pub const DBUS_BYTE_US: u64 = 110;
+/// One SBUS byte on the wire: 12 bits (two stop bits) at 100 kbaud, in µs.
+pub const SBUS_BYTE_US: u64 = 120;
 
 /// UART settings of SBUS: 100 kbaud, 8 data bits, even parity, two stop bits, inverted line
 /// (`inverted` as for [`dbus_config`]).
@@ -33,17 +43,25 @@ pub fn sbus_config(inverted: bool) -> usart::Config {
 }
 
 /// Reads a byte stream from a DMA ring-buffered UART into `receiver` until the end of time.
-/// Every chunk (the DMA reports on line idle, so a chunk is about one frame) is stamped with
-/// the time it was read; UART errors (framing, parity, overrun) are counted in
-/// [`Shared::input_errors`] and the decoder resynchronises on the next frame gap.
-pub async fn run_uart_receiver<R>(mut rx: RingBufferedUartRx<'static>, receiver: &Shared<R>) -> !
+///
+/// The DMA reports on line idle and at the half and end of its buffer, so a chunk may hold a
+/// whole frame or part of one. Each byte is stamped back from the moment the chunk was read:
+/// the last byte then, byte `i` of `n` at `read − (n − 1 − i) · byte_time`. Bytes of a frame
+/// thus stay `byte_time` apart even when the DMA splits the frame, and the decoder's frame gap
+/// (1 ms) finds frame boundaries and nothing else. UART errors (framing, parity, overrun) are
+/// counted in [`Shared::input_errors`]; the decoder resynchronises on the next frame gap.
+pub async fn run_uart_receiver<R>(
+    mut rx: RingBufferedUartRx<'static>,
+    receiver: &Shared<R>,
+    byte_time: Duration,
+) -> !
 where
     Shared<R>: PushBytes,
 {
     let mut chunk = [0u8; 64];
     loop {
         match rx.read(&mut chunk).await {
-            Ok(n) => receiver.push(chunk.get(..n).unwrap_or(&[]), Instant::now()),
+            Ok(n) => receiver.push(chunk.get(..n).unwrap_or(&[]), Instant::now(), byte_time),
             Err(_) => receiver.count_error(),
         }
     }
@@ -51,15 +69,15 @@ where
 
 /// Receivers that take bytes (implemented for the DBUS and SBUS receivers).
 pub trait PushBytes {
-    /// Feeds bytes received at `now`.
-    fn push(&self, bytes: &[u8], now: Instant);
+    /// Feeds bytes whose last one arrived at `last_at`, `byte_time` apart.
+    fn push(&self, bytes: &[u8], last_at: Instant, byte_time: Duration);
     /// Counts an input error.
     fn count_error(&self);
 }
 
 impl PushBytes for Shared<DbusReceiver> {
-    fn push(&self, bytes: &[u8], now: Instant) {
-        self.push_bytes(bytes, now);
+    fn push(&self, bytes: &[u8], last_at: Instant, byte_time: Duration) {
+        self.push_bytes_ending_at(bytes, last_at, byte_time);
     }
     fn count_error(&self) {
         self.record_input_error();
@@ -67,8 +85,8 @@ impl PushBytes for Shared<DbusReceiver> {
 }
 
 impl PushBytes for Shared<SbusReceiver> {
-    fn push(&self, bytes: &[u8], now: Instant) {
-        self.push_bytes(bytes, now);
+    fn push(&self, bytes: &[u8], last_at: Instant, byte_time: Duration) {
+        self.push_bytes_ending_at(bytes, last_at, byte_time);
     }
     fn count_error(&self) {
         self.record_input_error();
@@ -81,7 +99,7 @@ pub async fn dbus_task(
     rx: RingBufferedUartRx<'static>,
     receiver: &'static Shared<DbusReceiver>,
 ) -> ! {
-    run_uart_receiver(rx, receiver).await
+    run_uart_receiver(rx, receiver, Duration::from_micros(DBUS_BYTE_US)).await
 }
 
 /// The SBUS task: one per board. See [`run_uart_receiver`].
@@ -90,12 +108,14 @@ pub async fn sbus_task(
     rx: RingBufferedUartRx<'static>,
     receiver: &'static Shared<SbusReceiver>,
 ) -> ! {
-    run_uart_receiver(rx, receiver).await
+    run_uart_receiver(rx, receiver, Duration::from_micros(SBUS_BYTE_US)).await
 }
 
 /// PPM (8 channels, RC10_LIB's AirJoy): times the rising edges of the PPM line and feeds the
-/// intervals in µs to the decoder. Edge times come from embassy-time in the EXTI wake-up, so
-/// interrupt latency adds a few µs of jitter (a 500 µs stick range makes that < 1 %).
+/// intervals in µs to the decoder. Edge times are read when the task runs after the EXTI
+/// interrupt: spawn it on a high-priority executor (the control executor does) so that this
+/// is a few µs after the edge; in thread mode another task's run time would add to it. (Timer
+/// input capture would give hardware edge times.)
 #[embassy_executor::task]
 pub async fn ppm_task(
     mut pin: ExtiInput<'static, Async>,

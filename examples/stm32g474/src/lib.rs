@@ -8,6 +8,7 @@
 //! | FDCAN2 | PB12 RX, PB13 TX | |
 //! | FDCAN3 | PA8 RX, PB4 TX | |
 //! | DR16 DBUS | PC11 (USART3 RX), DMA1 CH1 | the DR16 line is inverted: inverted in the USART here |
+//! | clock | 24 MHz crystal (X3) | CAN at 1 Mbit/s needs a crystal, not the ±1 % internal oscillator |
 //! | VOFA+ telemetry | PA2 (LPUART1 TX, the ST-LINK virtual COM port), DMA1 CH2 | 921 600 baud |
 //!
 //! The control loop (schedulers, receivers) runs on an interrupt executor at priority 6
@@ -44,9 +45,10 @@ bind_interrupts!(pub struct Irqs {
 /// Bitrate of every DJI / Damiao / VESC bus.
 pub const CAN_BITRATE_BPS: u32 = 1_000_000;
 
-/// Clocks at 170 MHz, FDCAN on PCLK1; returns the peripherals.
+/// Clocks at 170 MHz from the NUCLEO's 24 MHz crystal (X3), FDCAN on PCLK1; returns the
+/// peripherals. Change the crystal here for your board.
 pub fn init() -> Peripherals {
-    embassy_stm32::init(rc10_stm32::clocks_170mhz())
+    embassy_stm32::init(rc10_stm32::clocks_170mhz(rc10_stm32::Crystal::Mhz24))
 }
 
 /// A bus configuration for a G4 FDCAN: 1 Mbit/s, 1 kHz, its 3 TX buffers.
@@ -83,18 +85,23 @@ macro_rules! fdcan3 {
     };
 }
 
-/// The DR16 receiver's UART: USART3 RX on PC11 with DMA1 CH1, ring-buffered.
+/// The DR16 receiver's UART: USART3 RX on PC11 with DMA1 CH1, ring-buffered into its own
+/// static 128-byte buffer.
 #[macro_export]
 macro_rules! dr16_uart {
-    ($p:ident) => {
-        $crate::ring_buffered(embassy_stm32::usart::UartRx::new(
-            $p.USART3,
-            $p.PC11,
-            $p.DMA1_CH1,
-            $crate::Irqs,
-            rc10_stm32::remote::dbus_config(true),
-        ))
-    };
+    ($p:ident) => {{
+        static BUFFER: static_cell::StaticCell<[u8; 128]> = static_cell::StaticCell::new();
+        $crate::ring_buffered(
+            embassy_stm32::usart::UartRx::new(
+                $p.USART3,
+                $p.PC11,
+                $p.DMA1_CH1,
+                $crate::Irqs,
+                rc10_stm32::remote::dbus_config(true),
+            ),
+            BUFFER.init([0; 128]),
+        )
+    }};
 }
 
 /// The VOFA+ telemetry UART: LPUART1 TX on PA2 (ST-LINK virtual COM port), DMA1 CH2.
@@ -125,12 +132,13 @@ pub fn telemetry_uart(
     defmt::unwrap!(uart)
 }
 
-/// Turns a DMA UART receiver into a ring-buffered one with a static 128-byte buffer.
+/// Turns a DMA UART receiver into a ring-buffered one over `buffer` (a setup error stops
+/// the firmware with a defmt message).
 pub fn ring_buffered(
     uart: Result<UartRx<'static, mode::Async>, usart::ConfigError>,
+    buffer: &'static mut [u8],
 ) -> RingBufferedUartRx<'static> {
-    static BUFFER: StaticCell<[u8; 128]> = StaticCell::new();
-    defmt::unwrap!(uart).into_ring_buffered(BUFFER.init([0; 128]))
+    defmt::unwrap!(uart).into_ring_buffered(buffer)
 }
 
 static CONTROL: InterruptExecutor = InterruptExecutor::new();

@@ -329,6 +329,20 @@ impl<F: ReceiverFrame, const N: usize> Shared<FrameReceiver<F, N>> {
             }
         });
     }
+
+    /// Feeds bytes of which the last arrived at `last_at`, each `byte_time` after the one
+    /// before (a DMA chunk read as soon as it ended). Stamping them back keeps the bytes of a
+    /// frame that the DMA split over two chunks less than a frame gap apart.
+    pub fn push_bytes_ending_at(&self, bytes: &[u8], last_at: Instant, byte_time: Duration) {
+        let n = u32::try_from(bytes.len()).unwrap_or(u32::MAX);
+        self.with(|r| {
+            for (i, b) in (0u32..).zip(bytes) {
+                let back = byte_time * n.saturating_sub(1).saturating_sub(i);
+                let at = last_at.checked_sub(back).unwrap_or(Instant::from_ticks(0));
+                let _ = r.push_byte(*b, at);
+            }
+        });
+    }
 }
 
 impl<R> core::fmt::Debug for Shared<R> {
@@ -336,6 +350,49 @@ impl<R> core::fmt::Debug for Shared<R> {
         f.debug_struct("Shared")
             .field("input_errors", &self.input_errors())
             .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod shared_tests {
+    use super::*;
+    use crate::remote::dbus::DbusReceiver;
+
+    /// A neutral DBUS frame: four sticks at 1024, both switches up (1), no mouse, no keys.
+    fn neutral_dbus() -> [u8; 18] {
+        let ch = [1024u64; 4];
+        let bits = ch[0] | ch[1] << 11 | ch[2] << 22 | ch[3] << 33 | 1 << 44 | 1 << 46;
+        let mut f = [0u8; 18];
+        for (i, byte) in f.iter_mut().take(6).enumerate() {
+            *byte = (bits >> (8 * i)) as u8;
+        }
+        f
+    }
+
+    #[test]
+    fn a_frame_split_over_two_dma_chunks_is_still_one_frame() {
+        let rx: Shared<DbusReceiver> = Shared::new(DbusReceiver::new(Duration::from_millis(100)));
+        let frame = neutral_dbus();
+        let byte = Duration::from_micros(110);
+        // The DMA half-transfer point falls after byte 9: that chunk is read as it ends; the
+        // rest at line idle, one byte time after its last byte.
+        let t1 = Instant::from_millis(100);
+        rx.push_bytes_ending_at(&frame[..9], t1, byte);
+        let t2 = t1 + byte * 9 + byte;
+        rx.push_bytes_ending_at(&frame[9..], t2, byte);
+        // And the next frame, 14 ms later, in one chunk.
+        let t3 = t1 + Duration::from_millis(14);
+        rx.push_bytes_ending_at(&frame, t3, byte);
+        assert_eq!(rx.with(|r| r.link().frames()), 2);
+        assert_eq!(rx.with(|r| r.link().errors()), 0);
+        // Stamping every byte of a chunk with its read time would have split that frame.
+        let naive: Shared<DbusReceiver> =
+            Shared::new(DbusReceiver::new(Duration::from_millis(100)));
+        naive.push_bytes(&frame[..9], t1);
+        naive.push_bytes(&frame[9..], t2 + Duration::from_millis(1));
+        naive.push_bytes(&frame, t3);
+        assert!(naive.with(|r| r.link().frames()) < 2);
+        assert!(naive.with(|r| r.link().errors()) >= 1);
     }
 }
 

@@ -1,9 +1,9 @@
 //! A 4×M3508 mecanum chassis driven by a DJI DR16 receiver, with VOFA+ telemetry of target
 //! and measured wheel speeds.
 //!
-//! Left stick: forward/back and sideways (up to 2 m/s); right stick horizontal: rotation (up
-//! to 4 rad/s). Accelerations are limited (4 m/s², 12 rad/s²), wheel speeds scaled down
-//! together past 400 rpm. If the radio goes silent for 100 ms (or the DR16 reports failsafe)
+//! Left stick: forward/back and sideways (asks up to 2 m/s); right stick horizontal: rotation
+//! (up to 4 rad/s). Accelerations are limited (4 m/s², 12 rad/s²), wheel speeds scaled down
+//! together past 400 rpm (with 76 mm wheels about 1.6 m/s straight ahead). If the radio goes silent for 100 ms (or the DR16 reports failsafe)
 //! the sticks read neutral and the chassis brakes to a stop.
 //!
 //! Wiring: NUCLEO-G474RE; FDCAN1 (PA11 RX / PA12 TX) to a transceiver and the four C620s set
