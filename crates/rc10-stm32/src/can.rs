@@ -12,7 +12,7 @@
 //!   an earlier tick are counted at the start of each tick (`tx_stale`): they mean the bus
 //!   could not carry a period's commands (congestion, or no node acknowledging).
 //! - **Non-blocking send.** `CanTx::write` waits for a free buffer; [`FdcanTx::try_send`]
-//!   polls it once (`embassy_futures::poll_once`): queued, or `Full`.
+//!   polls it once with a no-op waker: queued, or `Full`.
 //! - **Timestamps.** The driver's `Envelope::ts` is not the hardware reception time (it is
 //!   derived at read time, with a tick length that is not the counter's); it is not used.
 //!   Frames are stamped with embassy-time when the receiver reads them: up to the receiver's
