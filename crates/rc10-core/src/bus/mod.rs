@@ -139,7 +139,7 @@ pub enum BudgetLevel {
 pub enum RegisterError {
     /// The bus already holds its capacity (`N`) of nodes.
     Full,
-    /// The node declared more ID filters than an [`IdSet`](crate::node::IdSet) holds.
+    /// The node declared more ID filters than an [`IdSet`] holds.
     TooManyIds,
     /// The node's feedback IDs overlap those of the node registered at `existing` (e.g. an
     /// M3508 with id 5 and a GM6020 with id 1 both answer on 0x205).
