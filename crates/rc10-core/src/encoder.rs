@@ -726,5 +726,38 @@ mod tests {
             let a = e.angle_deg();
             prop_assert!((0.0..360.0).contains(&a));
         }
+
+        /// Any speed a DJI rotor reaches (±18 000 rpm = ±2457.6 counts per 1 ms frame), any
+        /// pattern of 0–3 lost frames, and timestamps up to 1 ms late (read late): the count
+        /// stays exact. Speed changes slowly (at most ±20 counts per period per period, about
+        /// an M2006's full-current acceleration), and each frame reports the mean speed of
+        /// its interval, as the driver computes it from two reported speeds.
+        #[test]
+        fn periodic_unwrapping_is_exact_through_losses_and_late_reads(
+            start_speed in -2457.0f64..2457.0,
+            frames in proptest::collection::vec((-20.0f64..20.0, 0u32..4, 0.0f64..1.0), 1..300),
+        ) {
+            let mut e = dji(GearRatio::M2006);
+            e.update(0).unwrap();
+            let (mut speed, mut pos, mut t, mut prev_stamp) = (start_speed, 0.0f64, 0u64, 0.0f64);
+            for (accel, lost, late) in frames {
+                let periods = u64::from(lost) + 1;
+                let mut travelled = 0.0;
+                for _ in 0..periods {
+                    let next = (speed + accel).clamp(-2457.6, 2457.6);
+                    travelled += (speed + next) / 2.0;
+                    speed = next;
+                }
+                pos += travelled;
+                t += periods;
+                let stamp = (t as f64 + late).max(prev_stamp);
+                let gap = stamp - prev_stamp;
+                prev_stamp = stamp;
+                let raw = (pos.round() as i64).rem_euclid(8192) as u16;
+                let mean = travelled / periods as f64;
+                e.update_periodic(raw, mean as f32, gap as f32).unwrap();
+                prop_assert_eq!(e.total_counts(), pos.round() as i64);
+            }
+        }
     }
 }

@@ -779,3 +779,107 @@ fn lowered_gm6020_voltage_limit_is_what_the_speed_loop_winds_against() {
     let raw = slot0(&tick(&m, now));
     assert!(raw < 3750 + 300, "raw {raw} after the limit was lifted");
 }
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// One thing an application or the bus can do to a motor.
+    #[derive(Debug, Clone)]
+    enum Op {
+        Current(f32),
+        Voltage(f32),
+        Rpm(f32),
+        Angle(f32),
+        Total(f32),
+        Torque(f32),
+        FeedForward(f32),
+        Limit(f32),
+        Disable,
+        Feedback { angle: u16, rpm: i16, temp: u8 },
+        Silence(u64),
+    }
+
+    fn any_f32() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            -1e6f32..1e6,
+            Just(f32::NAN),
+            Just(f32::INFINITY),
+            Just(f32::NEG_INFINITY),
+            Just(f32::MAX),
+            Just(-f32::MAX),
+            -50.0f32..50.0,
+        ]
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        prop_oneof![
+            any_f32().prop_map(Op::Current),
+            any_f32().prop_map(Op::Voltage),
+            any_f32().prop_map(Op::Rpm),
+            any_f32().prop_map(Op::Angle),
+            any_f32().prop_map(Op::Total),
+            any_f32().prop_map(Op::Torque),
+            any_f32().prop_map(Op::FeedForward),
+            any_f32().prop_map(Op::Limit),
+            Just(Op::Disable),
+            (0u16..8192, any::<i16>(), 0u8..140).prop_map(|(angle, rpm, temp)| Op::Feedback {
+                angle,
+                rpm,
+                temp
+            }),
+            (1u64..300).prop_map(Op::Silence),
+        ]
+    }
+
+    proptest! {
+        /// Whatever the targets, limits, mode switches and feedback, the slot value on the wire
+        /// is within the ESC's range, and exactly zero while the motor is offline.
+        #[test]
+        fn packed_command_stays_in_range_and_is_zero_offline(
+            model in prop_oneof![
+                Just(DjiModel::M3508),
+                Just(DjiModel::M2006),
+                Just(DjiModel::Gm6020Voltage),
+                Just(DjiModel::Gm6020Current),
+            ],
+            ops in proptest::collection::vec(op(), 1..200),
+        ) {
+            let m = DjiMotor::new(model, 1, DjiConfig::default_for(model)).unwrap();
+            let id = model.feedback_id(1);
+            let range: i16 = match model {
+                DjiModel::M3508 | DjiModel::Gm6020Current => 16384,
+                DjiModel::M2006 => 10000,
+                DjiModel::Gm6020Voltage => 25000,
+            };
+            let mut now = T0;
+            for op in ops {
+                match op {
+                    Op::Current(x) => { let _ = m.set_target_current(x); }
+                    Op::Voltage(x) => { let _ = m.set_target_voltage(x); }
+                    Op::Rpm(x) => { let _ = m.set_target_rpm(x); }
+                    Op::Angle(x) => { let _ = m.set_target_angle_deg(x); }
+                    Op::Total(x) => { let _ = m.set_target_total_angle_deg(x); }
+                    Op::Torque(x) => { let _ = m.set_target_torque_nm(x); }
+                    Op::FeedForward(x) => { let _ = m.set_feed_forward_torque_nm(x); }
+                    Op::Limit(x) => {
+                        let _ = m.set_current_limit_amps(x);
+                        let _ = m.set_voltage_limit_volts(x);
+                    }
+                    Op::Disable => m.disable(),
+                    Op::Feedback { angle, rpm, temp } => {
+                        m.update_feedback(&fb(id, angle, rpm, 0, temp), now).unwrap();
+                    }
+                    Op::Silence(ms) => now += Duration::from_millis(ms),
+                }
+                now += Duration::from_millis(1);
+                let raw = slot0(&tick(&m, now));
+                prop_assert!((-range..=range).contains(&raw), "{raw} outside ±{range}");
+                prop_assert!(m.state().command.is_finite());
+                if !m.is_online() {
+                    prop_assert_eq!(raw, 0);
+                }
+            }
+        }
+    }
+}
