@@ -7,10 +7,10 @@ use embassy_stm32::gpio::Pull;
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, DataBits, Parity, RingBufferedUartRx, StopBits};
 use embassy_time::Duration;
-use rc10_core::remote::Shared;
 use rc10_core::remote::dbus::DbusReceiver;
 use rc10_core::remote::ppm::PpmReceiver;
 use rc10_core::remote::sbus::SbusReceiver;
+use rc10_core::remote::{FrameReceiver, ReceiverFrame, Shared};
 use rc10_core::time::Instant;
 
 /// UART settings of a DJI DR16 receiver's DBUS output: 100 kbaud, 8 data bits, even parity,
@@ -50,46 +50,21 @@ pub fn sbus_config(inverted: bool) -> usart::Config {
 /// thus stay `byte_time` apart even when the DMA splits the frame, and the decoder's frame gap
 /// (1 ms) finds frame boundaries and nothing else. UART errors (framing, parity, overrun) are
 /// counted in [`Shared::input_errors`]; the decoder resynchronises on the next frame gap.
-pub async fn run_uart_receiver<R>(
+pub async fn run_uart_receiver<F: ReceiverFrame, const N: usize>(
     mut rx: RingBufferedUartRx<'static>,
-    receiver: &Shared<R>,
+    receiver: &Shared<FrameReceiver<F, N>>,
     byte_time: Duration,
-) -> !
-where
-    Shared<R>: PushBytes,
-{
+) -> ! {
     let mut chunk = [0u8; 64];
     loop {
         match rx.read(&mut chunk).await {
-            Ok(n) => receiver.push(chunk.get(..n).unwrap_or(&[]), Instant::now(), byte_time),
-            Err(_) => receiver.count_error(),
+            Ok(n) => receiver.push_bytes_ending_at(
+                chunk.get(..n).unwrap_or(&[]),
+                Instant::now(),
+                byte_time,
+            ),
+            Err(_) => receiver.record_input_error(),
         }
-    }
-}
-
-/// Receivers that take bytes (implemented for the DBUS and SBUS receivers).
-pub trait PushBytes {
-    /// Feeds bytes whose last one arrived at `last_at`, `byte_time` apart.
-    fn push(&self, bytes: &[u8], last_at: Instant, byte_time: Duration);
-    /// Counts an input error.
-    fn count_error(&self);
-}
-
-impl PushBytes for Shared<DbusReceiver> {
-    fn push(&self, bytes: &[u8], last_at: Instant, byte_time: Duration) {
-        self.push_bytes_ending_at(bytes, last_at, byte_time);
-    }
-    fn count_error(&self) {
-        self.record_input_error();
-    }
-}
-
-impl PushBytes for Shared<SbusReceiver> {
-    fn push(&self, bytes: &[u8], last_at: Instant, byte_time: Duration) {
-        self.push_bytes_ending_at(bytes, last_at, byte_time);
-    }
-    fn count_error(&self) {
-        self.record_input_error();
     }
 }
 

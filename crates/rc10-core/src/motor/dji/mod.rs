@@ -651,7 +651,8 @@ impl CanNode for DjiMotor {
                 },
             };
             let out = s.cascade.step(&measured, dt_s, limit);
-            s.command = saturate(out, limit);
+            // `step` already keeps the command within `limit`.
+            s.command = out;
         });
     }
 
