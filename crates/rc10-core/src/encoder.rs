@@ -156,6 +156,25 @@ pub struct Encoder {
     config: EncoderConfig,
     last_raw: Option<u16>,
     total_counts: i64,
+    /// Degrees of output per unit of [`output_position`](Self::output_position)'s remainder
+    /// (derived from the configuration; f32 bits, so that `Encoder` stays `Eq`).
+    deg_per_unit_bits: u32,
+}
+
+/// `v as f32`, through the single-instruction 32-bit conversion when `v` fits `i32`.
+#[inline]
+fn to_f32(v: i64) -> f32 {
+    match i32::try_from(v) {
+        Ok(v) => v as f32,
+        Err(_) => wide_to_f32(v),
+    }
+}
+
+/// The 64-bit conversion, out of line so that it is not computed speculatively.
+#[cold]
+#[inline(never)]
+fn wide_to_f32(v: i64) -> f32 {
+    v as f32
 }
 
 impl Encoder {
@@ -170,10 +189,12 @@ impl Encoder {
         {
             return None;
         }
+        let per_turn = config.counts_per_rev as i64 * config.gear.rotor_turns as i64;
         Some(Self {
             config,
             last_raw: None,
             total_counts: 0,
+            deg_per_unit_bits: (360.0 / per_turn as f32).to_bits(),
         })
     }
 
@@ -219,16 +240,18 @@ impl Encoder {
         match self.last_raw {
             Some(last) => {
                 let step = wrap_counts(i64::from(raw) - i64::from(last), n);
+                // 32-bit conversions (one instruction; the 64-bit ones are library calls).
+                let nf = f32::from(self.config.counts_per_rev);
                 let off = if predicted_counts.is_finite() {
-                    predicted_counts - step as f32
+                    predicted_counts - to_f32(step)
                 } else {
                     0.0
                 };
-                let turns = if off.abs() * 2.0 < n as f32 {
+                let turns = if off.abs() * 2.0 < nf {
                     0 // the usual case: the prediction agrees with the half-turn rule
                 } else {
                     // Bounded so that even an absurd prediction cannot overflow the count.
-                    libm::roundf(off / n as f32).clamp(-1.0e6, 1.0e6) as i64
+                    libm::roundf(off / nf).clamp(-1.0e6, 1.0e6) as i64
                 };
                 self.total_counts = self.total_counts.saturating_add(step + turns * n);
             }
@@ -305,19 +328,26 @@ impl Encoder {
     /// Output-shaft angle within one turn in degrees, [0, 360); exact to f32 rounding however
     /// many turns were made.
     pub fn angle_deg(&self) -> f32 {
-        let (_, rem, per_turn) = self.output_position();
-        let angle = rem as f32 * (360.0 / per_turn as f32);
+        self.angles_deg().0
+    }
+
+    /// [`angle_deg`](Self::angle_deg) and [`total_angle_deg`](Self::total_angle_deg)
+    /// together, for the price of one (a 64-bit division).
+    pub fn angles_deg(&self) -> (f32, f32) {
+        let (turns, rem, _) = self.output_position();
+        // `rem < per_turn` fits i32 for every real encoder and gear (the 32-bit conversion is
+        // one instruction, the 64-bit one a library call on the Cortex-M4).
+        let within = to_f32(rem) * f32::from_bits(self.deg_per_unit_bits);
         // Rounding of the last count below a full turn can give exactly 360.0.
-        if angle >= 360.0 { 0.0 } else { angle }
+        let angle = if within >= 360.0 { 0.0 } else { within };
+        (angle, to_f32(turns) * 360.0 + within)
     }
 
     /// Output-shaft multi-turn angle in degrees. Computed from whole turns plus the exact
     /// single-turn angle, so its only error is f32 rounding of the result (0.01° up to about
     /// 500 turns, 1° up to about 50 000 turns): it never drifts.
     pub fn total_angle_deg(&self) -> f32 {
-        let (turns, rem, per_turn) = self.output_position();
-        let within = rem as f32 * (360.0 / per_turn as f32);
-        turns as f32 * 360.0 + within
+        self.angles_deg().1
     }
 
     /// Makes the current position the origin (multi-turn position 0, angle 0).
@@ -373,7 +403,7 @@ impl Encoder {
         if i64::from(raw) >= n {
             return Err(EncoderError::OutOfRange { raw });
         }
-        let nf = n as f32;
+        let nf = f32::from(self.config.counts_per_rev);
         let gap = gap_periods.clamp(1.0, 1.0e6);
         // At most ±2 periods around the measured gap: the whole window moves the rotor by less
         // than a quarter turn, so every candidate gives the same turn count.
@@ -384,11 +414,11 @@ impl Encoder {
         let centre = libm::roundf(gap) as i64;
         let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
         for m in (centre - 2).max(1)..=centre + 2 {
-            let predicted = counts_per_period * m as f32;
-            let turns = libm::roundf((predicted - d0 as f32) / nf).clamp(-1.0e6, 1.0e6) as i64;
+            let predicted = counts_per_period * to_f32(m);
+            let turns = libm::roundf((predicted - to_f32(d0)) / nf).clamp(-1.0e6, 1.0e6) as i64;
             let step = d0 + turns * n;
-            let residual = (step as f32 - predicted).abs();
-            let distance = (m as f32 - gap).abs();
+            let residual = (to_f32(step) - predicted).abs();
+            let distance = (to_f32(m) - gap).abs();
             let better = match best {
                 None => true,
                 Some((r, d, _)) => {

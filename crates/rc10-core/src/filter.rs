@@ -54,9 +54,12 @@ impl LowPass {
             return self.output.unwrap_or(0.0);
         }
         let y = match self.output {
+            // A pass-through filter: the weighted form below would give `input` too.
+            _ if self.tau_s == 0.0 => input,
             None => input,
             Some(y) => {
-                let dt = dt_s.max(0.0);
+                // By comparison: `f32::max` is a library call on the Cortex-M4.
+                let dt = if dt_s > 0.0 { dt_s } else { 0.0 };
                 let denom = self.tau_s + dt;
                 // denom == 0 only for a pass-through filter called with dt = 0.
                 let alpha = if denom > 0.0 { dt / denom } else { 1.0 };

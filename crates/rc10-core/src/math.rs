@@ -105,9 +105,44 @@ pub fn wrap_positive(value: f32, period: f32) -> f32 {
     if !value.is_finite() || !period.is_finite() || period <= 0.0 {
         return 0.0;
     }
-    let r = value - period * libm::floorf(value / period);
+    wrap_positive_valid_period(value, period)
+}
+
+/// [`wrap_positive`] for a finite `value` and a `period` known to be finite and positive.
+#[inline]
+fn wrap_positive_valid_period(value: f32, period: f32) -> f32 {
+    let r = value - period * floor(value / period);
     // Rounding can land exactly on `period` for tiny negative inputs (e.g. -1e-9).
     if r >= period || r < 0.0 { 0.0 } else { r }
+}
+
+/// [`wrap_signed`] for a `period` already checked to be finite and positive (a validated
+/// configuration): the same result, without checking the period again on every call.
+#[inline]
+pub(crate) fn wrap_signed_valid_period(value: f32, period: f32) -> f32 {
+    let half = period * 0.5;
+    let shifted = value + half;
+    if !shifted.is_finite() {
+        return 0.0 - half;
+    }
+    wrap_positive_valid_period(shifted, period) - half
+}
+
+/// `floor(x)`, exactly as `libm::floorf`, without its library call on the Cortex-M4 for the
+/// values that have a fraction (`|x| < 2²³`, where the truncating conversion is exact); every
+/// float of larger magnitude is an integer already (and NaN and ±inf pass through).
+#[inline]
+pub(crate) fn floor(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let truncated = x as i32 as f32;
+        if truncated > x {
+            truncated - 1.0
+        } else {
+            truncated
+        }
+    } else {
+        x
+    }
 }
 
 /// Wraps `value` into `[-period/2, period/2)`: the signed shortest offset on a circle.
@@ -124,8 +159,7 @@ pub fn wrap_signed(value: f32, period: f32) -> f32 {
     if !value.is_finite() || !period.is_finite() || period <= 0.0 {
         return 0.0;
     }
-    let half = period * 0.5;
-    wrap_positive(value + half, period) - half
+    wrap_signed_valid_period(value, period)
 }
 
 /// Wraps an angle into `[0, 360)` degrees.

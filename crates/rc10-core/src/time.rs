@@ -94,6 +94,11 @@ impl DeltaTime {
 /// beyond that the relative error stays below 2^-24.
 #[inline]
 pub fn micros_to_s(us: u64) -> f32 {
+    // Below a second (every control period): one 32-bit conversion, the same value as the
+    // split below (whose whole-second part is then 0).
+    if us < 1_000_000 {
+        return us as u32 as f32 * 1e-6;
+    }
     // Split so that large counts keep their relative precision without f64 (soft-float on M4).
     let whole_s = (us / 1_000_000) as f32;
     let frac_us = (us % 1_000_000) as f32;

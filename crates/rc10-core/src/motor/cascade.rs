@@ -34,9 +34,11 @@ pub struct CascadeConfig {
 pub struct Measured {
     /// Output-shaft speed in rpm.
     pub speed_rpm: f32,
-    /// Output-shaft angle in [0, 360) degrees.
+    /// Output-shaft angle in [0, 360) degrees. Read only on ticks when
+    /// [`Cascade::angle_loop_due`].
     pub angle_deg: f32,
-    /// Output-shaft multi-turn angle in degrees.
+    /// Output-shaft multi-turn angle in degrees. Read only on ticks when
+    /// [`Cascade::angle_loop_due`].
     pub total_angle_deg: f32,
 }
 
@@ -145,6 +147,15 @@ impl Cascade {
         Ok(())
     }
 
+    /// Whether the next [`step`](Self::step) runs the angle loop, i.e. reads
+    /// [`Measured::angle_deg`] or [`Measured::total_angle_deg`]. On other ticks a motor may
+    /// leave them at zero and skip computing them (an encoder's angles cost a 64-bit
+    /// division): in angle mode with the default divider, nine ticks in ten.
+    pub fn angle_loop_due(&self) -> bool {
+        matches!(self.mode, ControlMode::Angle | ControlMode::TotalAngle)
+            && self.ticks_since_angle.saturating_add(1) >= self.config.angle_divider.max(1)
+    }
+
     /// Sets the angle loop's divider (0 is treated as 1).
     pub fn set_angle_divider(&mut self, divider: u8) {
         self.config.angle_divider = divider;
@@ -227,8 +238,7 @@ impl Cascade {
             ControlMode::Speed => {
                 self.speed_target_rpm = self.target;
                 self.speed
-                    .update_within(self.target, m.speed_rpm, self.feed_forward, dt_s, limit)
-                    .output
+                    .output_within(self.target, m.speed_rpm, self.feed_forward, dt_s, limit)
             }
             ControlMode::Angle | ControlMode::TotalAngle => {
                 self.angle_dt_s += dt_s;
@@ -240,22 +250,23 @@ impl Cascade {
                     } else {
                         m.total_angle_deg
                     };
-                    self.speed_target_rpm = self
-                        .angle
-                        .update(self.target, measured, self.angle_dt_s)
-                        .output;
+                    self.speed_target_rpm = self.angle.output_within(
+                        self.target,
+                        measured,
+                        0.0,
+                        self.angle_dt_s,
+                        f32::INFINITY,
+                    );
                     self.ticks_since_angle = 0;
                     self.angle_dt_s = 0.0;
                 }
-                self.speed
-                    .update_within(
-                        self.speed_target_rpm,
-                        m.speed_rpm,
-                        self.feed_forward,
-                        dt_s,
-                        limit,
-                    )
-                    .output
+                self.speed.output_within(
+                    self.speed_target_rpm,
+                    m.speed_rpm,
+                    self.feed_forward,
+                    dt_s,
+                    limit,
+                )
             }
         };
         self.output
@@ -388,6 +399,32 @@ mod tests {
         }
         c.step(&m2, 0.001, 20.0);
         assert!((c.speed_target_rpm() - 50.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn angle_loop_due_exactly_on_the_ticks_that_read_the_angle() {
+        let mut c = cascade();
+        c.set_target(ControlMode::Speed, 10.0);
+        assert!(!c.angle_loop_due(), "speed mode never reads angles");
+        c.set_target(ControlMode::TotalAngle, 10.0);
+        // A wrong angle on the ticks the loop is not due must change nothing; the right one
+        // (0°, error 10° → 100 rpm) is given only when due.
+        let wrong = Measured {
+            total_angle_deg: 1.0e4,
+            ..Default::default()
+        };
+        let mut due_ticks = 0;
+        for k in 0..25 {
+            let due = c.angle_loop_due();
+            let m = if due { Measured::default() } else { wrong };
+            c.step(&m, 0.001, 20.0);
+            if due {
+                due_ticks += 1;
+                assert_eq!(k % 10, 0, "due on tick {k}");
+            }
+            assert!((c.speed_target_rpm() - 100.0).abs() < 1e-3, "tick {k}");
+        }
+        assert_eq!(due_ticks, 3);
     }
 
     #[test]

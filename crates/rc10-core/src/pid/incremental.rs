@@ -1,6 +1,7 @@
 //! Incremental (velocity-form) PID with an optional tracking differentiator on the target:
 //! RC10_LIB's speed-loop controller.
 
+use super::positional::{all_finite, below, clamp_abs, dt_valid};
 use super::{
     ErrorMode, PidConfigError, PidTerms, TrackingDifferentiator, check_deadband, check_gains,
     check_limit,
@@ -158,7 +159,7 @@ impl IncrementalPid {
     /// Non-finite `target` or `measurement`: returns [`PidTerms::ZERO`] and leaves the state
     /// unchanged. A `dt_s` that is not finite and positive holds the output.
     pub fn update(&mut self, target: f32, measurement: f32, dt_s: f32) -> PidTerms {
-        if !(target.is_finite() && measurement.is_finite()) {
+        if !all_finite(target, measurement, 0.0) {
             return PidTerms::ZERO;
         }
         let c = self.config;
@@ -173,18 +174,24 @@ impl IncrementalPid {
         };
         let e = ErrorMode::Linear.diff(tracked, measurement);
         let (e1, e2) = self.history.unwrap_or((e, e));
-        let dt_ok = dt_s.is_finite() && dt_s > 0.0;
+        let dt_ok = dt_valid(dt_s);
 
         let (p, i, d) = if dt_ok && e.abs() > c.deadband {
             (
                 finite(c.kp * (e - e1)),
                 finite(c.ki * e * dt_s),
-                finite(c.kd * (e - 2.0 * e1 + e2) / dt_s),
+                // kd = 0 (the usual speed loop): no divide.
+                if c.kd == 0.0 {
+                    0.0
+                } else {
+                    finite(c.kd * (e - 2.0 * e1 + e2) / dt_s)
+                },
             )
         } else {
             (0.0, 0.0, 0.0)
         };
-        self.output = saturate(self.output + p + i + d, c.output_limit);
+        // Finite terms: the sum is finite or ±inf, never NaN, and the capped limit is finite.
+        self.output = clamp_abs(self.output + p + i + d, below(c.output_limit, f32::MAX));
         if dt_ok {
             self.history = Some((e, e1));
         }

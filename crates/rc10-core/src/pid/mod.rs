@@ -53,7 +53,8 @@ impl ErrorMode {
     pub(crate) fn diff(self, a: f32, b: f32) -> f32 {
         match self {
             Self::Linear => a - b,
-            Self::Circular { period } => crate::math::wrap_signed(a - b, period),
+            // The period was validated with the configuration.
+            Self::Circular { period } => crate::math::wrap_signed_valid_period(a - b, period),
         }
     }
 

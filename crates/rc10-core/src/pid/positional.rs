@@ -156,6 +156,47 @@ pub struct Pid {
     prev_measurement: Option<f32>,
     d_filter: LowPass,
     last: PidTerms,
+    /// `output_limit`, at most `f32::MAX` (derived from the configuration).
+    output_cap: f32,
+    /// `integral_limit`, at most `f32::MAX` (derived from the configuration).
+    integral_cap: f32,
+}
+
+/// Whether all three are finite, in a few instructions: `x · 0` is zero for finite `x` and
+/// NaN for ±inf and NaN, and a NaN anywhere makes the sum NaN.
+#[inline]
+pub(super) fn all_finite(a: f32, b: f32, c: f32) -> bool {
+    a * 0.0 + b * 0.0 + c * 0.0 == 0.0
+}
+
+/// Whether `dt_s` is finite and positive, with float comparisons only (NaN fails both; `inf ·
+/// 0` is NaN).
+#[inline]
+pub(super) fn dt_valid(dt_s: f32) -> bool {
+    dt_s > 0.0 && dt_s * 0.0 == 0.0
+}
+
+/// The smaller of `a` and `b` by comparison (`f32::min` is a library call on the Cortex-M4).
+#[inline]
+pub(super) fn below(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// `x` within `±lim`, for a `lim` in `[0, f32::MAX]` and an `x` that is not NaN.
+#[inline]
+pub(super) fn clamp_abs(x: f32, lim: f32) -> f32 {
+    if x > lim {
+        lim
+    } else if x < -lim {
+        -lim
+    } else {
+        x
+    }
+}
+
+/// A limit capped at `f32::MAX` (infinity, "no limit", becomes the largest finite value).
+const fn cap(limit: f32) -> f32 {
+    if limit < f32::MAX { limit } else { f32::MAX }
 }
 
 impl Pid {
@@ -169,6 +210,8 @@ impl Pid {
                 prev_measurement: None,
                 d_filter: LowPass::new(config.d_cutoff_hz),
                 last: PidTerms::ZERO,
+                output_cap: cap(config.output_limit),
+                integral_cap: cap(config.integral_limit),
             }),
             Err(e) => Err(e),
         }
@@ -191,11 +234,14 @@ impl Pid {
             }
         }
         self.config = config;
+        self.output_cap = cap(config.output_limit);
+        self.integral_cap = cap(config.integral_limit);
         self.integral = saturate(self.integral, config.integral_limit);
         Ok(())
     }
 
     /// One step without feed-forward; see [`update_with_ff`](Self::update_with_ff).
+    #[inline]
     pub fn update(&mut self, target: f32, measurement: f32, dt_s: f32) -> PidTerms {
         self.update_within(target, measurement, 0.0, dt_s, f32::INFINITY)
     }
@@ -206,6 +252,7 @@ impl Pid {
     /// Non-finite `target`, `measurement` or `feed_forward`: returns [`PidTerms::ZERO`] and
     /// leaves the state unchanged. A `dt_s` that is not finite and positive keeps the integral
     /// and the derivative as they were for this step.
+    #[inline]
     pub fn update_with_ff(
         &mut self,
         target: f32,
@@ -224,6 +271,7 @@ impl Pid {
     /// kept within `±effective limit` (an integral beyond it is effort that cannot be
     /// applied, and would make the output jump when the limit is lifted). A NaN or negative
     /// `limit` counts as zero.
+    #[inline]
     pub fn update_within(
         &mut self,
         target: f32,
@@ -232,37 +280,108 @@ impl Pid {
         dt_s: f32,
         limit: f32,
     ) -> PidTerms {
-        if !(target.is_finite() && measurement.is_finite() && feed_forward.is_finite()) {
+        if !all_finite(target, measurement, feed_forward) {
             return PidTerms::ZERO;
         }
-        let c = self.config;
+        self.step_finite(target, measurement, feed_forward, dt_s, limit);
+        self.last
+    }
+
+    /// [`update_within`](Self::update_within) returning the output only (`0.0` for rejected
+    /// input); the per-term breakdown is in [`last_terms`](Self::last_terms). What a cascade
+    /// calls every tick: nothing is built or copied that it does not read.
+    #[inline]
+    pub fn output_within(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+    ) -> f32 {
+        if !all_finite(target, measurement, feed_forward) {
+            return 0.0;
+        }
+        self.step_finite(target, measurement, feed_forward, dt_s, limit)
+    }
+
+    /// One step for finite `target`, `measurement` and `feed_forward`: updates the state and
+    /// `last`, returns the output.
+    ///
+    /// Every intermediate stays finite, so the limits are plain comparisons: the error, P and
+    /// D are held within `±f32::MAX` (a difference of two huge finite values can overflow),
+    /// the limits are at most `f32::MAX`, an integral increment can only be `±inf` (never NaN:
+    /// `ki ≠ 0`, `dt > 0` and the two errors are finite) and is clamped, and a sum of finite
+    /// terms with at most one infinite partial sum is never NaN.
+    fn step_finite(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+    ) -> f32 {
+        let c = &self.config;
         // `max(0)` by comparison: NaN and negative limits become 0.
         let extra = if limit > 0.0 { limit } else { 0.0 };
-        let out_limit = if extra < c.output_limit {
-            extra
-        } else {
-            c.output_limit
-        };
+        let out_limit = below(extra, self.output_cap);
         // The integral never needs to exceed what, with the feed-forward, reaches the limit.
-        let i_reach = out_limit + feed_forward.abs();
-        let i_limit = if i_reach < c.integral_limit {
-            i_reach
-        } else {
-            c.integral_limit
-        };
-        let raw_error = c.error_mode.diff(target, measurement);
+        let i_limit = below(out_limit + feed_forward.abs(), self.integral_cap);
+        let raw_error = finite(c.error_mode.diff(target, measurement));
         let error = if raw_error.abs() <= c.deadband {
             0.0
         } else {
             raw_error
         };
-        let dt_ok = dt_s.is_finite() && dt_s > 0.0;
+        let dt_ok = dt_valid(dt_s);
 
         let p = finite(c.kp * error);
-
         // With kd = 0 the D path is skipped entirely (no divide, no filter).
-        let d = match self.prev_measurement {
-            _ if c.kd == 0.0 => 0.0,
+        let d = if c.kd == 0.0 {
+            0.0
+        } else {
+            self.derivative(measurement, dt_s, dt_ok)
+        };
+
+        let c = &self.config;
+        let in_band = raw_error.abs() <= c.integral_separation;
+        // Held within the limit in force (which may have dropped since the last step); a
+        // new value below replaces it already clamped.
+        let mut integral = clamp_abs(self.integral, i_limit);
+        if dt_ok && c.ki != 0.0 && in_band {
+            // Trapezoid over in-band errors only: right after the error re-enters the band the
+            // previous (separated) error is not folded in.
+            let prev_error = match self.prev_error {
+                Some(e) => e,
+                None => error,
+            };
+            let increment = c.ki * 0.5 * (error + prev_error) * dt_s;
+            let candidate = clamp_abs(integral + increment, i_limit);
+            let unlimited = p + candidate + d + feed_forward;
+            let winding_up =
+                unlimited.abs() > out_limit && (candidate - integral) * unlimited > 0.0;
+            if !winding_up {
+                integral = candidate;
+            }
+        }
+        let output = clamp_abs(p + integral + d + feed_forward, out_limit);
+        self.integral = integral;
+        self.prev_error = if in_band { Some(error) } else { None };
+        self.prev_measurement = Some(measurement);
+        self.last = PidTerms {
+            p,
+            i: integral,
+            d,
+            ff: feed_forward,
+            output,
+        };
+        output
+    }
+
+    /// The D term (`kd ≠ 0`): `-kd · d(measurement)/dt`, through the optional low-pass.
+    fn derivative(&mut self, measurement: f32, dt_s: f32, dt_ok: bool) -> f32 {
+        let c = &self.config;
+        match self.prev_measurement {
             Some(prev) if dt_ok => {
                 let change = c.error_mode.diff(measurement, prev);
                 let raw_d = finite(-c.kd * change / dt_s);
@@ -276,35 +395,7 @@ impl Pid {
             }
             Some(_) => self.d_filter.output().unwrap_or(0.0),
             None => 0.0,
-        };
-
-        let in_band = raw_error.abs() <= c.integral_separation;
-        if dt_ok && c.ki != 0.0 && in_band {
-            // Trapezoid over in-band errors only: right after the error re-enters the band the
-            // previous (separated) error is not folded in.
-            let prev_error = self.prev_error.unwrap_or(error);
-            let increment = c.ki * 0.5 * (error + prev_error) * dt_s;
-            let candidate = saturate(self.integral + increment, i_limit);
-            let unlimited = p + candidate + d + feed_forward;
-            let winding_up =
-                unlimited.abs() > out_limit && (candidate - self.integral) * unlimited > 0.0;
-            if !winding_up {
-                self.integral = candidate;
-            }
         }
-        self.integral = saturate(self.integral, i_limit);
-
-        let output = saturate(p + self.integral + d + feed_forward, out_limit);
-        self.prev_error = in_band.then_some(error);
-        self.prev_measurement = Some(measurement);
-        self.last = PidTerms {
-            p,
-            i: self.integral,
-            d,
-            ff: feed_forward,
-            output,
-        };
-        self.last
     }
 
     /// The terms of the most recent accepted step ([`PidTerms::ZERO`] before the first).

@@ -74,7 +74,7 @@ impl TrackingDifferentiator {
             return self.state.unwrap_or((0.0, 0.0));
         }
         let (mut x1, mut x2) = self.state.unwrap_or((input, 0.0));
-        if dt_s.is_finite() && dt_s > 0.0 {
+        if super::positional::dt_valid(dt_s) {
             let r = self.r_rad_s;
             let h_max = 1.0 / r;
             if dt_s > h_max * MAX_SUBSTEPS as f32 {
@@ -82,7 +82,8 @@ impl TrackingDifferentiator {
             } else {
                 let mut remaining = dt_s;
                 while remaining > 0.0 {
-                    let h = remaining.min(h_max);
+                    // By comparison: `f32::min` is a library call on the Cortex-M4.
+                    let h = if remaining < h_max { remaining } else { h_max };
                     let accel = -r * r * (x1 - input) - 2.0 * r * x2;
                     x1 += h * x2;
                     x2 += h * accel;

@@ -28,12 +28,12 @@ use super::cascade::{Cascade, CascadeConfig, Measured};
 use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError, ThermalLimits};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::{DJI_COUNTS_PER_REV, Encoder, EncoderConfig, GearRatio, Origin};
-use crate::math::saturate;
 use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
 use crate::pid::{PidConfig, PidConfigError};
 use crate::time::Instant;
 use core::cell::RefCell;
 use core::fmt;
+use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
@@ -274,7 +274,9 @@ struct DjiState {
     temperature_c: Option<f32>,
     liveness: Liveness,
     awaiting_return: bool,
-    command: f32,
+    /// The thermal derating factor for `temperature_c` (1 without limits or a reading),
+    /// computed when a frame brings a new temperature, not on every tick.
+    derate: f32,
     /// A user limit on the command (amps, or volts in voltage mode); infinity for none.
     user_limit: f32,
     /// Live-tuning and homing requests, applied by the next tick.
@@ -309,6 +311,15 @@ pub struct DjiMotor {
     esc_id: u8,
     slot: CommandSlot,
     config: DjiConfig,
+    /// [`command_limit`](Self::command_limit), computed once.
+    limit: f32,
+    /// Raw counts per command unit, and the largest raw value sent (derived from the model
+    /// and the configuration, so packing a command multiplies and compares, no more).
+    raw_per_unit: f32,
+    raw_limit: f32,
+    /// The command of the last tick (f32 bits; amps, or volts in voltage mode): written by
+    /// `update` and read by `pack_command` in the same scheduler task, and by `state()`.
+    command: AtomicU32,
     state: Mutex<CriticalSectionRawMutex, RefCell<DjiState>>,
 }
 
@@ -338,11 +349,22 @@ impl DjiMotor {
                 Some(e) => e,
                 None => return Err(DjiError::InvalidOrigin),
             };
+        let (raw_fs, unit_fs) = model.raw_full_scale();
+        let raw_per_unit = raw_fs / unit_fs;
+        let raw_limit = if model.is_voltage_mode() {
+            config.voltage_raw_limit as f32
+        } else {
+            raw_fs
+        };
         Ok(Self {
             model,
             esc_id,
             slot,
             config,
+            limit: raw_limit / raw_per_unit,
+            raw_per_unit,
+            raw_limit,
+            command: AtomicU32::new(0),
             state: Mutex::new(RefCell::new(DjiState {
                 cascade,
                 encoder,
@@ -352,7 +374,7 @@ impl DjiMotor {
                 temperature_c: None,
                 liveness: Liveness::NEW,
                 awaiting_return: false,
-                command: 0.0,
+                derate: 1.0,
                 user_limit: f32::INFINITY,
                 pending_speed: None,
                 pending_angle: None,
@@ -484,28 +506,35 @@ impl DjiMotor {
     /// The largest command this motor sends, in amps (volts in voltage mode): the ESC's range,
     /// or for the GM6020 in voltage mode the configured [`DjiConfig::voltage_raw_limit`].
     pub fn command_limit(&self) -> f32 {
-        if self.model.is_voltage_mode() {
-            let (raw_fs, unit_fs) = self.model.raw_full_scale();
-            f32::from(self.config.voltage_raw_limit.max(0)) * (unit_fs / raw_fs)
-        } else {
-            self.model.max_command()
-        }
+        self.limit
     }
 
     /// Converts a command (amps, or volts in voltage mode) to the raw slot value, clamped to
     /// the ESC's range before the integer conversion (no wrap, no sign flip).
     pub fn command_to_raw(&self, command: f32) -> i16 {
-        let (raw_fs, unit_fs) = self.model.raw_full_scale();
-        let raw_limit = if self.model.is_voltage_mode() {
-            f32::from(self.config.voltage_raw_limit.max(0))
+        let lim = self.raw_limit;
+        let raw = command * self.raw_per_unit;
+        // A NaN passes both comparisons and becomes 0 in the conversion below.
+        let raw = if raw > lim {
+            lim
+        } else if raw < -lim {
+            -lim
         } else {
-            raw_fs
+            raw
         };
-        let raw = saturate(command * (raw_fs / unit_fs), raw_limit);
-        // |raw| ≤ 30000 < i16::MAX, and saturate maps NaN to 0. Rounded half away from zero
-        // by hand: `roundf` is a library call on the Cortex-M4.
+        // Rounded half away from zero by hand (`roundf` is a library call on the Cortex-M4),
+        // then converted through i32, a single saturating instruction that maps NaN to 0:
+        // |raw| ≤ 30000.5, so the i16 it narrows to is exact.
         let half = if raw < 0.0 { -0.5 } else { 0.5 };
-        (raw + half) as i16
+        (raw + half) as i32 as i16
+    }
+
+    fn store_command(&self, command: f32) {
+        self.command.store(command.to_bits(), Ordering::Relaxed);
+    }
+
+    fn stored_command(&self) -> f32 {
+        f32::from_bits(self.command.load(Ordering::Relaxed))
     }
 
     fn set(&self, mode: ControlMode, target: f32) -> Result<(), TargetError> {
@@ -570,7 +599,16 @@ impl DjiMotor {
         } else {
             f32::from(raw_current) * (unit_fs / raw_fs)
         });
-        s.temperature_c = self.model.reports_temperature().then_some(f32::from(d[6]));
+        if self.model.reports_temperature() {
+            let celsius = f32::from(d[6]);
+            if s.temperature_c != Some(celsius) {
+                s.temperature_c = Some(celsius);
+                s.derate = match self.config.health.thermal {
+                    Some(limits) => limits.derating(celsius),
+                    None => 1.0,
+                };
+            }
+        }
         s.liveness.record_feedback(now);
         Ok(())
     }
@@ -617,7 +655,7 @@ impl CanNode for DjiMotor {
                 s.cascade.reset();
             }
             if !s.liveness.is_online() {
-                s.command = 0.0;
+                self.store_command(0.0);
                 return;
             }
             if let Some(deg) = s.pending_home_deg.take()
@@ -625,40 +663,32 @@ impl CanNode for DjiMotor {
             {
                 s.pending_home_deg = Some(deg); // no reading yet: try again next tick
             }
-            let derate = match (health.thermal, s.temperature_c) {
-                (Some(limits), Some(t)) => limits.derating(t),
-                _ => 1.0,
-            };
             // The limit in force: the ESC's range, derated, and the user's limit if lower.
-            let range = self.command_limit() * derate;
+            let range = self.limit * s.derate;
             let limit = if s.user_limit < range {
                 s.user_limit
             } else {
                 range
             };
-            // Angles cost integer division; only the angle modes need them.
-            let angles = matches!(
-                s.cascade.mode(),
-                ControlMode::Angle | ControlMode::TotalAngle
-            );
+            // Angles cost a 64-bit division; only the ticks that run the angle loop read them.
+            let angles = s.cascade.angle_loop_due();
+            let (angle_deg, total_angle_deg) = if angles {
+                s.encoder.angles_deg()
+            } else {
+                (0.0, 0.0)
+            };
             let measured = Measured {
                 speed_rpm: s.speed_rpm,
-                angle_deg: if angles { s.encoder.angle_deg() } else { 0.0 },
-                total_angle_deg: if angles {
-                    s.encoder.total_angle_deg()
-                } else {
-                    0.0
-                },
+                angle_deg,
+                total_angle_deg,
             };
-            let out = s.cascade.step(&measured, dt_s, limit);
             // `step` already keeps the command within `limit`.
-            s.command = out;
+            self.store_command(s.cascade.step(&measured, dt_s, limit));
         });
     }
 
     fn pack_command(&self, out: &mut TxBatch) {
-        let command = self.state.lock(|s| s.borrow().command);
-        out.write_slot(self.slot, self.command_to_raw(command));
+        out.write_slot(self.slot, self.command_to_raw(self.stored_command()));
     }
 }
 
@@ -746,7 +776,7 @@ impl Motor for DjiMotor {
                 total_angle_deg: s.encoder.has_reading().then(|| s.encoder.total_angle_deg()),
                 current_amps: s.current_amps,
                 temperature_c: s.temperature_c,
-                command: s.command,
+                command: self.stored_command(),
                 offline_events: s.liveness.offline_events(),
                 last_feedback: s.liveness.last_feedback(),
             }
