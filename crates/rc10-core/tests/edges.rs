@@ -1,0 +1,207 @@
+//! Behaviour at the edges that mutation testing showed no test pinned down: each test here
+//! fails if the named line of rc10-core is changed (operator flipped, call removed), with
+//! expected values from the control law and the protocol, not from the code.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
+use rc10_core::bus::{BusBuilder, Dispatch};
+use rc10_core::can::{CanFrame, IdFilter};
+use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
+use rc10_core::motor::cascade::{Cascade, CascadeConfig, Measured};
+use rc10_core::motor::dji::DjiMotor;
+use rc10_core::motor::{ControlMode, Motor};
+use rc10_core::node::{BusUsage, CanNode, FrameError, TxBatch};
+use rc10_core::pid::{Pid, PidConfig};
+use rc10_core::time::Instant;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+const DT: f32 = 0.001;
+
+#[test]
+fn derivative_term_opposes_rising_measurement_in_the_output() {
+    // kd = 0.5 s, measurement rising 0.01 per 1 ms = 10 /s: D = -5, and the output is D.
+    let mut pid = Pid::new(PidConfig::new(0.0, 0.0, 0.5)).unwrap();
+    pid.update(0.0, 0.0, DT);
+    let t = pid.update(0.0, 0.01, DT);
+    assert!((t.output + 5.0).abs() < 1e-3, "{t:?}");
+    // With P and a feed-forward as well: output = p + d + ff = 2·(0 - 0.02) - 5 + 1.
+    let t = pid.update_with_ff(0.0, 0.02, 1.0, DT);
+    assert!((t.output - (0.0 - 5.0 + 1.0)).abs() < 1e-2, "{t:?}");
+    let mut pd = Pid::new(PidConfig::new(2.0, 0.0, 0.5)).unwrap();
+    pd.update(0.0, 0.0, DT);
+    let t = pd.update_with_ff(0.0, 0.01, 1.0, DT);
+    assert!((t.output - (-0.02 - 5.0 + 1.0)).abs() < 1e-3, "{t:?}");
+}
+
+#[test]
+fn anti_windup_counts_feed_forward_and_direction() {
+    // Limit 10; P = 1·8 = 8, feed-forward 3: 11 > 10, so a positive integral increment would
+    // wind up and must not be taken.
+    let mut pid = Pid::new(PidConfig::new(1.0, 100.0, 0.0).with_output_limit(10.0)).unwrap();
+    let t = pid.update_with_ff(8.0, 0.0, 3.0, DT);
+    assert_eq!(t.output, 10.0);
+    assert_eq!(
+        pid.integral(),
+        0.0,
+        "integral grew while saturated by P + FF"
+    );
+    // A feed-forward pulling the other way: 8 - 3 = 5 is inside the limit, so it integrates
+    // 100 · 8 · 0.001 = 0.8 per step.
+    let mut pid = Pid::new(PidConfig::new(1.0, 100.0, 0.0).with_output_limit(10.0)).unwrap();
+    pid.update_with_ff(8.0, 0.0, -3.0, DT);
+    assert!((pid.integral() - 0.8).abs() < 1e-5, "{}", pid.integral());
+    // Saturated high, but the error has turned negative: unwinding is always allowed.
+    let mut pid = Pid::new(PidConfig::new(0.0, 100.0, 0.0).with_output_limit(1.0)).unwrap();
+    pid.set_integral(1.0);
+    pid.update_with_ff(-1.0, 0.0, 5.0, DT);
+    assert!(pid.integral() < 1.0, "{}", pid.integral());
+}
+
+fn cascade(angle: PidConfig) -> Cascade {
+    Cascade::new(CascadeConfig {
+        speed: PidConfig::new(0.1, 10.0, 0.0).with_output_limit(20.0),
+        angle,
+        angle_divider: 10,
+    })
+    .unwrap()
+}
+
+#[test]
+fn angle_loop_integrates_over_the_accumulated_ten_ticks() {
+    // ki = 100 /s on a 2° error. The loop runs on the first tick (dt = one tick: 100 · 2 ·
+    // 0.001 = 0.2 rpm) and then every 10th, each time over the 10 ticks since the last run
+    // (100 · 2 · 0.010 s = 2 rpm).
+    let mut c = cascade(PidConfig::new(0.0, 100.0, 0.0).with_output_limit(300.0));
+    c.set_target(ControlMode::TotalAngle, 2.0);
+    let m = Measured::default();
+    c.step(&m, DT, 20.0);
+    assert!(
+        (c.angle_terms().i - 0.2).abs() < 1e-4,
+        "{:?}",
+        c.angle_terms()
+    );
+    for _ in 0..10 {
+        c.step(&m, DT, 20.0);
+    }
+    assert!(
+        (c.angle_terms().i - 2.2).abs() < 1e-3,
+        "{:?}",
+        c.angle_terms()
+    );
+}
+
+#[test]
+fn disabling_zeroes_the_applied_command_at_once() {
+    let mut c = cascade(PidConfig::new(1.0, 0.0, 0.0));
+    c.set_target(ControlMode::Current, 5.0);
+    assert_eq!(c.step(&Measured::default(), DT, 20.0), 5.0);
+    c.set_target(ControlMode::Disabled, 0.0);
+    assert_eq!(c.output(), 0.0);
+    // Re-enabled from Disabled: nothing was applied, so nothing is preloaded.
+    c.set_target(ControlMode::Speed, 0.0);
+    assert_eq!(c.step(&Measured::default(), DT, 20.0), 0.0);
+}
+
+#[test]
+fn speed_to_angle_mode_keeps_the_speed_loop_integral() {
+    let mut c = cascade(PidConfig::new(1.0, 0.0, 0.0).with_output_limit(300.0));
+    c.set_target(ControlMode::Speed, 100.0);
+    for _ in 0..50 {
+        c.step(&Measured::default(), DT, 20.0);
+    }
+    let held = c.speed_terms().i;
+    assert!(held > 0.0);
+    // Both modes use the speed loop: no reset, the held current carries over.
+    c.set_target(ControlMode::TotalAngle, 0.0);
+    c.step(&Measured::default(), DT, 20.0);
+    assert!(
+        c.speed_terms().i > held * 0.5,
+        "speed loop was reset on a closed-loop switch"
+    );
+}
+
+#[test]
+fn dji_total_angle_target_is_recorded_in_its_mode() {
+    let m = DjiMotor::m3508(1).unwrap();
+    m.set_target_total_angle_deg(720.0).unwrap();
+    let s = m.state();
+    assert_eq!(s.mode, ControlMode::TotalAngle);
+    assert_eq!(s.target, 720.0);
+}
+
+#[test]
+fn gm6020_voltage_mode_reports_current_on_the_3_amp_scale() {
+    // Feedback D4–5 is torque current on the ±16384 ↔ ±3 A scale in either mode.
+    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    let frame = CanFrame::standard(0x205, &[0, 0, 0, 0, 0x20, 0x00, 30, 0]).unwrap();
+    m.update_feedback(&frame, Instant::from_micros(1000))
+        .unwrap();
+    let amps = m.state().current_amps.unwrap();
+    assert!((amps - 8192.0 * 3.0 / 16384.0).abs() < 1e-4, "{amps}");
+}
+
+#[test]
+fn rotor_angle_is_the_raw_count_in_degrees() {
+    // Power-on origin: the first reading is 0°, and a quarter turn (2048 counts) later 90°.
+    let mut e = Encoder::new(EncoderConfig::dji(GearRatio::M3508)).unwrap();
+    e.update(100).unwrap();
+    assert_eq!(e.rotor_angle_deg(), 0.0);
+    e.update(2148).unwrap();
+    assert!((e.rotor_angle_deg() - 90.0).abs() < 1e-4);
+    e.update(4196).unwrap();
+    assert!((e.rotor_angle_deg() - 180.0).abs() < 1e-4);
+    e.update(6244).unwrap(); // a quarter turn further
+    assert!(
+        (e.rotor_angle_deg() - 270.0).abs() < 1e-4,
+        "{}",
+        e.rotor_angle_deg()
+    );
+}
+
+#[test]
+fn tx_batch_counts_frames_it_cannot_hold() {
+    let mut b = TxBatch::new();
+    let frame = CanFrame::standard(0x100, &[1]).unwrap();
+    let mut refused = 0;
+    for _ in 0..rc10_core::node::MAX_FRAMES_PER_TICK + 2 {
+        if b.push(frame).is_err() {
+            refused += 1;
+        }
+    }
+    assert_eq!(refused, 2);
+    assert_eq!(b.overflowed(), 2);
+}
+
+/// A node that keeps the default `matches_frame` (its declared listen filter).
+struct Listener {
+    frames: AtomicU32,
+}
+
+impl CanNode for Listener {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage::NONE.listening(IdFilter::standard(0x321), 100)
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        self.frames.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, _out: &mut TxBatch) {}
+}
+
+#[test]
+fn default_matches_frame_claims_only_declared_ids() {
+    static NODE: Listener = Listener {
+        frames: AtomicU32::new(0),
+    };
+    let mut b: BusBuilder<'static, 4> = BusBuilder::new();
+    b.register(&NODE).unwrap();
+    let bus = b.build();
+    let now = Instant::from_micros(1);
+    let other = CanFrame::standard(0x322, &[0]).unwrap();
+    assert_eq!(bus.dispatch(&other, now), Dispatch::Unmatched);
+    let ext = CanFrame::extended(0x321, &[0]).unwrap();
+    assert_eq!(bus.dispatch(&ext, now), Dispatch::Unmatched);
+    let own = CanFrame::standard(0x321, &[0]).unwrap();
+    assert_eq!(bus.dispatch(&own, now), Dispatch::Handled(0));
+    assert_eq!(NODE.frames.load(Ordering::Relaxed), 1);
+}
