@@ -6,6 +6,11 @@
 //! The bus does not run by itself: the world loop asks it for the next moment something
 //! happens ([`SimBus::busy_until`]), completes frames ([`SimBus::complete`]) and starts the next
 //! one ([`SimBus::start_next`]).
+//!
+//! Two controller faults are modelled here: bus-off ([`SimBus::set_mcu_bus_off`]: pending
+//! frames aborted, nothing sent or received) and no acknowledgement
+//! ([`SimBus::set_mcu_no_ack`]: the controller is cut off from the other nodes, so its frames
+//! are retransmitted without end and stay in its TX buffers, and it receives nothing).
 
 use rc10_core::can::{BusStatus, CanFrame, CanTransmit, ErrorState, Id, SendError, timing};
 use std::collections::VecDeque;
@@ -75,16 +80,23 @@ pub struct SimBusStats {
     pub device_tx_dropped: u64,
     /// Frames the fault injector removed from the wire.
     pub lost: u64,
+    /// Controller frames refused because it was bus-off.
+    pub mcu_tx_bus_off: u64,
 }
 
 /// The simulated bus.
 #[derive(Debug)]
 pub struct SimBus {
     config: SimBusConfig,
-    mcu_tx: VecDeque<CanFrame>,
+    /// The controller's pending frames, each with its sequence number ([`SimBus::next_mcu_seq`]).
+    mcu_tx: VecDeque<(u64, CanFrame)>,
     device_tx: Vec<VecDeque<CanFrame>>,
-    on_wire: Option<(Sender, CanFrame, u64)>,
+    /// The frame on the wire: sender, frame, end time, and for a controller frame its sequence
+    /// number.
+    on_wire: Option<(Sender, CanFrame, u64, Option<u64>)>,
     mcu_bus_off: bool,
+    mcu_no_ack: bool,
+    mcu_seq: u64,
     stats: SimBusStats,
 }
 
@@ -97,6 +109,8 @@ impl SimBus {
             device_tx: Vec::new(),
             on_wire: None,
             mcu_bus_off: false,
+            mcu_no_ack: false,
+            mcu_seq: 0,
             stats: SimBusStats::default(),
         }
     }
@@ -133,19 +147,38 @@ impl SimBus {
 
     /// When the frame on the wire ends, if one is.
     pub fn busy_until(&self) -> Option<u64> {
-        self.on_wire.map(|(_, _, end)| end)
+        self.on_wire.map(|(_, _, end, _)| end)
     }
 
     /// Takes the frame that ends at `now_us`, if any.
     pub fn complete(&mut self, now_us: u64) -> Option<(Sender, CanFrame)> {
+        self.complete_with_seq(now_us)
+            .map(|(sender, frame, _)| (sender, frame))
+    }
+
+    /// [`complete`](Self::complete), with the sequence number of a controller frame (the
+    /// order in which [`McuPort`] accepted it: see [`next_mcu_seq`](Self::next_mcu_seq)).
+    pub fn complete_with_seq(&mut self, now_us: u64) -> Option<(Sender, CanFrame, Option<u64>)> {
         match self.on_wire {
-            Some((sender, frame, end)) if end <= now_us => {
+            Some((sender, frame, end, seq)) if end <= now_us => {
                 self.on_wire = None;
                 self.stats.frames += 1;
-                Some((sender, frame))
+                Some((sender, frame, seq))
             }
             _ => None,
         }
+    }
+
+    /// The sequence number the next frame the controller's port accepts will get: frames are
+    /// numbered 0, 1, 2… in the order `try_send` accepted them.
+    pub fn next_mcu_seq(&self) -> u64 {
+        self.mcu_seq
+    }
+
+    /// Controller frames holding a TX buffer now: waiting, or on the wire (what
+    /// [`CanTransmit::still_queued`] reports).
+    pub fn mcu_pending(&self) -> usize {
+        self.mcu_frames_held()
     }
 
     /// Puts the controller into bus-off (it sends and receives nothing; its pending TX frames
@@ -162,9 +195,31 @@ impl SimBus {
         self.mcu_bus_off
     }
 
+    /// Cuts the controller off from every other node (no node acknowledges its frames: the
+    /// other nodes are unpowered, or the wire to them is broken) or reconnects it.
+    ///
+    /// While cut off, the controller retransmits its pending frame without end: its frames
+    /// never complete and keep their TX buffers, so its port soon reports
+    /// [`SendError::Full`] and [`CanTransmit::still_queued`] counts them at every tick; its
+    /// status is error-passive with an ACK error each time it is read (the FDCAN's TEC stops
+    /// at 128 on ACK errors, so it never goes bus-off this way). The other nodes no longer
+    /// hear it and it no longer hears them (the world loop does not deliver their frames to
+    /// it: [`mcu_no_ack`](Self::mcu_no_ack)); among themselves they carry on. When it is
+    /// reconnected, its pending frames go out, oldest first: they carry the commands they
+    /// were packed with.
+    pub fn set_mcu_no_ack(&mut self, no_ack: bool) {
+        self.mcu_no_ack = no_ack;
+    }
+
+    /// Whether the controller is cut off from the other nodes (see
+    /// [`set_mcu_no_ack`](Self::set_mcu_no_ack)).
+    pub fn mcu_no_ack(&self) -> bool {
+        self.mcu_no_ack
+    }
+
     /// Controller frames holding a TX buffer: waiting, or on the wire.
     fn mcu_frames_held(&self) -> usize {
-        let on_wire = matches!(self.on_wire, Some((Sender::Mcu, _, _)));
+        let on_wire = matches!(self.on_wire, Some((Sender::Mcu, _, _, _)));
         self.mcu_tx.len() + usize::from(on_wire)
     }
 
@@ -176,6 +231,10 @@ impl SimBus {
     /// Index in `mcu_tx` of the controller's frame that enters arbitration next, per
     /// [`SimBusConfig::mcu_tx_order`].
     fn mcu_next(&self) -> Option<usize> {
+        if self.mcu_no_ack {
+            // Retransmitted on the controller's own side of the cut: nobody else hears it.
+            return None;
+        }
         match self.config.mcu_tx_order {
             TxOrder::Fifo => (!self.mcu_tx.is_empty()).then_some(0),
             // `min_by_key` keeps the first of equal keys: the oldest.
@@ -183,7 +242,7 @@ impl SimBus {
                 .mcu_tx
                 .iter()
                 .enumerate()
-                .min_by_key(|(_, f)| arbitration_key(f))
+                .min_by_key(|(_, (_, f))| arbitration_key(f))
                 .map(|(i, _)| i),
         }
     }
@@ -200,7 +259,7 @@ impl SimBus {
         let mcu_next = self.mcu_next();
         let candidates = mcu_next
             .and_then(|i| self.mcu_tx.get(i))
-            .map(|f| (Sender::Mcu, f))
+            .map(|(_, f)| (Sender::Mcu, f))
             .into_iter()
             .chain(
                 self.device_tx
@@ -216,13 +275,19 @@ impl SimBus {
         }
         let Some((_, sender)) = best else { return };
         let frame = match sender {
-            Sender::Mcu => mcu_next.and_then(|i| self.mcu_tx.remove(i)),
-            Sender::Device(i) => self.device_tx.get_mut(i).and_then(VecDeque::pop_front),
+            Sender::Mcu => mcu_next
+                .and_then(|i| self.mcu_tx.remove(i))
+                .map(|(seq, f)| (f, Some(seq))),
+            Sender::Device(i) => self
+                .device_tx
+                .get_mut(i)
+                .and_then(VecDeque::pop_front)
+                .map(|f| (f, None)),
         };
-        if let Some(frame) = frame {
+        if let Some((frame, seq)) = frame {
             let duration = u64::from(timing::frame_time_us(&frame, self.config.bitrate_bps));
             self.stats.busy_us += duration;
-            self.on_wire = Some((sender, frame, now_us + duration));
+            self.on_wire = Some((sender, frame, now_us + duration, seq));
         }
     }
 }
@@ -249,6 +314,7 @@ pub struct McuPort<'a> {
 impl CanTransmit for McuPort<'_> {
     fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
         if self.bus.mcu_bus_off {
+            self.bus.stats.mcu_tx_bus_off += 1;
             return Err(SendError::BusOff);
         }
         // A frame on the wire still holds its TX buffer until it completes, as on the FDCAN.
@@ -256,7 +322,9 @@ impl CanTransmit for McuPort<'_> {
             self.bus.stats.mcu_tx_full += 1;
             return Err(SendError::Full);
         }
-        self.bus.mcu_tx.push_back(*frame);
+        let seq = self.bus.mcu_seq;
+        self.bus.mcu_seq += 1;
+        self.bus.mcu_tx.push_back((seq, *frame));
         Ok(())
     }
 
@@ -265,6 +333,15 @@ impl CanTransmit for McuPort<'_> {
             BusStatus {
                 state: ErrorState::BusOff,
                 tx_error_count: 255,
+                ..BusStatus::default()
+            }
+        } else if self.bus.mcu_no_ack && self.bus.mcu_frames_held() > 0 {
+            // Retransmitting without acknowledgement: an ACK error on every attempt, the TEC
+            // held at 128 (error-passive; ACK errors while passive do not raise it further).
+            BusStatus {
+                state: ErrorState::Passive,
+                tx_error_count: 128,
+                protocol_error: true,
                 ..BusStatus::default()
             }
         } else {
@@ -448,6 +525,62 @@ mod tests {
         let end = bus.busy_until().unwrap();
         bus.complete(end);
         assert_eq!(bus.mcu_port().still_queued(), 2);
+    }
+
+    #[test]
+    fn without_acknowledgement_controller_frames_stay_queued_until_reconnected() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        let esc = bus.add_device();
+        bus.set_mcu_no_ack(true);
+        assert_eq!(bus.mcu_port().status(), BusStatus::default()); // nothing to send yet
+        for id in [0x200, 0x1FF, 0x2FF] {
+            bus.mcu_port().try_send(&std_frame(id)).unwrap();
+        }
+        assert_eq!(
+            bus.mcu_port().try_send(&std_frame(0x2FE)),
+            Err(SendError::Full)
+        );
+        assert_eq!(bus.stats().mcu_tx_full, 1);
+        let status = bus.mcu_port().status();
+        assert_eq!(status.state, ErrorState::Passive);
+        assert!(status.protocol_error);
+        // The devices still talk among themselves; the controller's frames never go out.
+        bus.device_send(esc, std_frame(0x201));
+        bus.start_next(0);
+        let end = bus.busy_until().unwrap();
+        assert_eq!(
+            bus.complete(end),
+            Some((Sender::Device(0), std_frame(0x201)))
+        );
+        bus.start_next(end);
+        assert_eq!(bus.busy_until(), None);
+        assert_eq!(bus.mcu_port().still_queued(), 3);
+        // Reconnected: the held frames leave, oldest first, with their sequence numbers.
+        bus.set_mcu_no_ack(false);
+        assert_eq!(bus.mcu_port().status(), BusStatus::default());
+        let mut now = end;
+        for (seq, id) in [(0, 0x200), (1, 0x1FF), (2, 0x2FF)] {
+            bus.start_next(now);
+            now = bus.busy_until().unwrap();
+            assert_eq!(
+                bus.complete_with_seq(now),
+                Some((Sender::Mcu, std_frame(id), Some(seq)))
+            );
+        }
+        assert_eq!(bus.next_mcu_seq(), 3);
+        assert_eq!(bus.mcu_pending(), 0);
+    }
+
+    #[test]
+    fn frames_refused_while_bus_off_are_counted() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        bus.set_mcu_bus_off(true);
+        assert_eq!(
+            bus.mcu_port().try_send(&std_frame(0x200)),
+            Err(SendError::BusOff)
+        );
+        assert_eq!(bus.stats().mcu_tx_bus_off, 1);
+        assert_eq!(bus.next_mcu_seq(), 0);
     }
 
     #[test]

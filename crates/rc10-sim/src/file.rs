@@ -22,7 +22,7 @@
 //! steps = [[10, 90.0]]            # [time in ms, value]
 //!
 //! [[fault]]
-//! kind = "power_cut"  # power_cut | stall | over_temperature | frame_loss | corruption | delay | bus_off | rx_stall
+//! kind = "power_cut"  # power_cut | stall | over_temperature | frame_loss | corruption | delay | bus_off | rx_stall | no_ack | scheduler_stall
 //! motor = 1
 //! from_ms = 300
 //! to_ms = 500
@@ -300,6 +300,14 @@ enum FileFault {
         from_ms: u64,
         to_ms: u64,
     },
+    NoAck {
+        from_ms: u64,
+        to_ms: u64,
+    },
+    SchedulerStall {
+        from_ms: u64,
+        to_ms: u64,
+    },
 }
 
 fn invalid(field: String, problem: impl Into<String>) -> FileError {
@@ -470,6 +478,14 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
             FileFault::RxStall { from_ms, to_ms } => {
                 window(from_ms, to_ms)?;
                 Fault::RxStall { from_ms, to_ms }
+            }
+            FileFault::NoAck { from_ms, to_ms } => {
+                window(from_ms, to_ms)?;
+                Fault::NoAck { from_ms, to_ms }
+            }
+            FileFault::SchedulerStall { from_ms, to_ms } => {
+                window(from_ms, to_ms)?;
+                Fault::SchedulerStall { from_ms, to_ms }
             }
         });
     }
@@ -684,6 +700,27 @@ mod tests {
         let unknown_key = format!("{MINIMAL}\n[bus]\ntx_mode = \"fifo\"\n");
         let e = parse(&unknown_key).unwrap_err().to_string();
         assert!(e.contains("tx_mode"), "{e}");
+    }
+
+    #[test]
+    fn no_ack_and_scheduler_stall_faults_parse() {
+        let text = format!(
+            "{MINIMAL}\n[[fault]]\nkind = \"no_ack\"\nfrom_ms = 10\nto_ms = 20\n\
+             [[fault]]\nkind = \"scheduler_stall\"\nfrom_ms = 30\nto_ms = 35\n"
+        );
+        assert_eq!(
+            parse(&text).unwrap().faults,
+            vec![
+                Fault::NoAck {
+                    from_ms: 10,
+                    to_ms: 20
+                },
+                Fault::SchedulerStall {
+                    from_ms: 30,
+                    to_ms: 35
+                }
+            ]
+        );
     }
 
     #[test]

@@ -5,7 +5,8 @@
 //! - [`bus`]: the simulated bus (bit timing with stuffing, arbitration, TX buffer limits);
 //! - [`plant`]: ESC + motor models (current loop, back-EMF limit, friction, quantised
 //!   feedback, temperature);
-//! - [`scenario`]: motors, targets and faults, and the world loop;
+//! - [`scenario`]: motors, targets and faults, the world loop, and the fault soak's checks
+//!   ([`scenario::soak`]);
 //! - [`file`](mod@file): scenario files in TOML;
 //! - [`metrics`]: step-response figures and the full-current minimum rise time;
 //! - [`output`]: metrics table, CSV traces, SVG plots.

@@ -4,7 +4,7 @@
 use clap::{Parser, Subcommand};
 use rc10_sim::metrics::min_speed_rise_time_s;
 use rc10_sim::plant::MotorParams;
-use rc10_sim::scenario::{Scenario, TargetKind, builtin, run_with_progress};
+use rc10_sim::scenario::{Scenario, TargetKind, builtin, run_with_progress, soak};
 use rc10_sim::{output, scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -42,6 +42,11 @@ struct RunArgs {
     /// Do not write the plot.
     #[arg(long)]
     no_plot: bool,
+    /// Judge the run with the fault soak's checks (offline detection, zero commands while
+    /// offline, resumption, ESC ranges, scheduler timing, statistics) and exit non-zero if one
+    /// fails. Always on for `fault-soak`.
+    #[arg(long)]
+    checks: bool,
 }
 
 /// Prints to stdout; a closed pipe (`rc10-sim | head`) is not an error worth a panic.
@@ -83,6 +88,9 @@ fn run_cmd(args: RunArgs) -> Result<(), String> {
             }
         }
     };
+    if args.checks || scenario.name == soak::NAME {
+        return run_checked(&scenario, &args, &mut progress, started);
+    }
     let result = run_with_progress(&scenario, &mut progress)
         .map_err(|e| format!("scenario `{}`: {e}", scenario.name))?;
     let wall = started.elapsed().as_secs_f64();
@@ -122,6 +130,49 @@ fn run_cmd(args: RunArgs) -> Result<(), String> {
         scenario.duration_ms
     ));
     Ok(())
+}
+
+/// Runs `scenario` under the soak checks: summary, report, trace, plots; an error if a check
+/// failed (after everything is written).
+fn run_checked(
+    scenario: &Scenario,
+    args: &RunArgs,
+    progress: &mut dyn FnMut(u64),
+    started: std::time::Instant,
+) -> Result<(), String> {
+    let outcome = soak::run_soak(scenario, progress);
+    let wall = started.elapsed().as_secs_f64();
+    if let Some(result) = &outcome.result {
+        say(&output::summary(scenario, result));
+        say("\n");
+    }
+    say(&outcome.report.text());
+    if let Some(result) = &outcome.result {
+        let paths =
+            soak::write_outputs(scenario, result, &outcome.report, &args.out, !args.no_plot)
+                .map_err(|e| format!("writing results to {}: {e}", args.out.display()))?;
+        for p in paths {
+            say(&format!("wrote     {}\n", p.display()));
+        }
+    }
+    say(&format!(
+        "speed     {:.0} x real time ({:.3} s wall for {} ms simulated)\n",
+        scenario.duration_ms as f64 * 1e-3 / wall.max(1e-9),
+        wall,
+        scenario.duration_ms
+    ));
+    let failed = outcome.report.failed();
+    if failed.is_empty() {
+        Ok(())
+    } else {
+        let names: Vec<&str> = failed.iter().map(|c| c.title()).collect();
+        Err(format!(
+            "scenario `{}`: {} check(s) failed: {}",
+            scenario.name,
+            failed.len(),
+            names.join("; ")
+        ))
+    }
 }
 
 fn main() -> ExitCode {

@@ -166,6 +166,7 @@ pub fn builtin() -> Vec<Scenario> {
             "a DR16 drives a 16 kg mecanum chassis: forward, strafe, spin, diagonal, radio loss",
             4400,
         )),
+        super::soak::fault_soak(),
     ]
 }
 

@@ -77,11 +77,46 @@ pub enum Fault {
         /// End, ms.
         to_ms: u64,
     },
+    /// No node acknowledges the controller in `[from_ms, to_ms)` (the other nodes unpowered,
+    /// or the wire to them broken): its frames are retransmitted without end and stay in its
+    /// 3 TX buffers, so `try_send` reports them full and every tick finds them still queued;
+    /// its status reads error-passive with an ACK error; it receives nothing. The frames
+    /// held leave when the window ends. See [`SimBus::set_mcu_no_ack`].
+    NoAck {
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
+    /// The scheduler task is held up in `[from_ms, to_ms)` (a higher-priority task, a
+    /// debugger): the ticks due then do not run; the next runs at `to_ms`, late, and rc10's
+    /// tick pacing skips the missed ones instead of running them back to back.
+    SchedulerStall {
+        /// Start, ms.
+        from_ms: u64,
+        /// End, ms.
+        to_ms: u64,
+    },
 }
 
 /// Whether `t_ms` lies in `[from_ms, to_ms)`.
 pub(super) fn in_window(t_ms: u64, from_ms: u64, to_ms: u64) -> bool {
     (from_ms..to_ms).contains(&t_ms)
+}
+
+/// If the scheduler is held up at `t_ms`, the end of that hold-up (ms): the time it runs
+/// again, after every overlapping or adjoining stall.
+pub(super) fn scheduler_stall_end(scenario: &Scenario, t_ms: u64) -> Option<u64> {
+    let mut end = None;
+    let mut t = t_ms;
+    while let Some(to) = scenario.faults.iter().find_map(|f| match *f {
+        Fault::SchedulerStall { from_ms, to_ms } if in_window(t, from_ms, to_ms) => Some(to_ms),
+        _ => None,
+    }) {
+        end = Some(to);
+        t = to;
+    }
+    end
 }
 
 /// Whether the controller's receive path is stalled at `t_ms`.
@@ -109,8 +144,17 @@ pub(super) fn delay_us(scenario: &Scenario, t_ms: u64) -> u64 {
         .unwrap_or(0)
 }
 
-/// Applies the faults that set a state (bus-off, power cut, stall, over-temperature) at `t_ms`;
-/// one-shot faults fire only `on_ms_edge`.
+/// A motor's bit in a mask of motors (none beyond the 64th).
+fn motor_bit(motor: usize) -> u64 {
+    u32::try_from(motor)
+        .ok()
+        .and_then(|m| 1u64.checked_shl(m))
+        .unwrap_or(0)
+}
+
+/// Applies the faults that set a state (bus-off, no acknowledgement, power cut, stall,
+/// over-temperature) at `t_ms`; one-shot faults fire only `on_ms_edge`. A state is on while
+/// any of its windows is: a motor can be cut twice, the bus go off twice.
 pub(super) fn apply_state_faults(
     scenario: &Scenario,
     bus: &mut SimBus,
@@ -118,18 +162,27 @@ pub(super) fn apply_state_faults(
     t_ms: u64,
     on_ms_edge: bool,
 ) {
+    // Which states some fault sets (`has_*`, bit masks of motors) and which are on now.
+    let (mut has_bus_off, mut bus_off, mut has_no_ack, mut no_ack) = (false, false, false, false);
+    let (mut cut, mut unpowered, mut stalled, mut locked) = (0u64, 0u64, 0u64, 0u64);
     for fault in &scenario.faults {
         match *fault {
             Fault::BusOff { from_ms, to_ms } => {
-                bus.set_mcu_bus_off(in_window(t_ms, from_ms, to_ms));
+                has_bus_off = true;
+                bus_off |= in_window(t_ms, from_ms, to_ms);
+            }
+            Fault::NoAck { from_ms, to_ms } => {
+                has_no_ack = true;
+                no_ack |= in_window(t_ms, from_ms, to_ms);
             }
             Fault::PowerCut {
                 motor,
                 from_ms,
                 to_ms,
             } => {
-                if let Some(esc) = escs.get_mut(motor) {
-                    esc.set_powered(!in_window(t_ms, from_ms, to_ms));
+                cut |= motor_bit(motor);
+                if in_window(t_ms, from_ms, to_ms) {
+                    unpowered |= motor_bit(motor);
                 }
             }
             Fault::Stall {
@@ -137,8 +190,9 @@ pub(super) fn apply_state_faults(
                 from_ms,
                 to_ms,
             } => {
-                if let Some(esc) = escs.get_mut(motor) {
-                    esc.set_locked(in_window(t_ms, from_ms, to_ms));
+                stalled |= motor_bit(motor);
+                if in_window(t_ms, from_ms, to_ms) {
+                    locked |= motor_bit(motor);
                 }
             }
             Fault::OverTemperature {
@@ -151,6 +205,21 @@ pub(super) fn apply_state_faults(
                 }
             }
             _ => {}
+        }
+    }
+    if has_bus_off {
+        bus.set_mcu_bus_off(bus_off);
+    }
+    if has_no_ack {
+        bus.set_mcu_no_ack(no_ack);
+    }
+    for (i, esc) in escs.iter_mut().enumerate() {
+        let bit = motor_bit(i);
+        if cut & bit != 0 {
+            esc.set_powered(unpowered & bit == 0);
+        }
+        if stalled & bit != 0 {
+            esc.set_locked(locked & bit != 0);
         }
     }
 }

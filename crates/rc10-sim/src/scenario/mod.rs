@@ -5,19 +5,26 @@
 //! the rc10 tick every 1 ms, each ESC's feedback every 1 ms at its own (seeded) phase, and frame
 //! ends on the bus. Received frames are dispatched to rc10 the moment they end on the wire,
 //! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled,
-//! sent in FIFO or lowest-ID-first order ([`Scenario::tx_order`]).
+//! sent in FIFO or lowest-ID-first order ([`Scenario::tx_order`]). Ticks are paced by rc10's
+//! `TickPacer`, as on a board.
+//!
+//! [`run_observed`] lets a [`RunObserver`] watch every frame and tick of a run; [`soak`] uses
+//! it for the fault soak (`fault-soak`) and its checks.
 
 mod builtin;
 mod chassis_app;
 mod faults;
 mod metrics;
+mod observe;
 mod run;
+pub mod soak;
 
 pub use builtin::builtin;
 pub use chassis_app::{ChassisDrive, ChassisSample};
 pub use faults::Fault;
 pub use metrics::TargetMetrics;
-pub use run::{run, run_with_progress};
+pub use observe::{NoObserver, RunObserver, RxDrop, TickEvent, WireEvent};
+pub use run::{run, run_observed, run_with_progress};
 
 use crate::bus::{SimBusStats, TxOrder};
 use crate::plant::Load;
@@ -183,7 +190,8 @@ pub struct Sample {
 pub struct RunResult {
     /// The scenario's name.
     pub name: String,
-    /// One sample per ms.
+    /// One sample per tick (every ms, except during a [`Fault::SchedulerStall`]); a
+    /// [`RunObserver`] may keep fewer ([`RunObserver::keep_sample`]).
     pub samples: Vec<Sample>,
     /// The simulated bus's counters.
     pub bus: SimBusStats,

@@ -1,8 +1,11 @@
 //! The world loop: virtual time from event to event, frames delivered between bus, ESCs and rc10.
 
 use super::chassis_app::ChassisApp;
-use super::faults::{Fault, apply_state_faults, delay_us, in_window, rx_stalled};
+use super::faults::{
+    Fault, apply_state_faults, delay_us, in_window, rx_stalled, scheduler_stall_end,
+};
 use super::metrics::target_metrics;
+use super::observe::{NoObserver, RunObserver, RxDrop, TickEvent, WireEvent};
 use super::{
     Controller, MAX_MOTORS, MotorSample, MotorSpec, RunResult, Sample, Scenario, SimError,
     TargetKind,
@@ -12,12 +15,12 @@ use crate::legacy::LegacyM3508;
 use crate::plant::{DjiEsc, MotorParams};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{Rng, SeedableRng};
-use rc10_core::bus::BusBuilder;
+use rc10_core::bus::{BusBuilder, TickPacer};
 use rc10_core::can::{CanFrame, ReceiveError};
 use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
 use rc10_core::motor::{Motor, TargetError};
 use rc10_core::node::{CanNode, TxBatch};
-use rc10_core::time::Instant;
+use rc10_core::time::{Duration, Instant};
 
 /// A motor the simulator can drive: rc10's scheduler side and the application side.
 pub(super) trait SimMotor: CanNode + Motor {}
@@ -87,6 +90,30 @@ pub fn run_with_progress(
     scenario: &Scenario,
     progress: &mut dyn FnMut(u64),
 ) -> Result<RunResult, SimError> {
+    run_observed(scenario, progress, &mut NoObserver)
+}
+
+/// `t_us`, or, if the scheduler is held up then ([`Fault::SchedulerStall`]), the end of that
+/// hold-up in µs.
+fn after_scheduler_stall(scenario: &Scenario, t_us: u64) -> u64 {
+    match scheduler_stall_end(scenario, t_us / 1000) {
+        Some(end_ms) => t_us.max(end_ms * 1000),
+        None => t_us,
+    }
+}
+
+/// [`run_with_progress`], telling `observer` about every frame on the wire, every frame
+/// handed to rc10 and every tick, and keeping only the samples it asks for
+/// ([`RunObserver::keep_sample`]).
+///
+/// Ticks are paced by rc10's own `TickPacer`, as `run_scheduler` paces them on a board:
+/// `dt` is the period, except after a [`Fault::SchedulerStall`], when the late tick's `dt` is
+/// bounded and the missed ticks are counted as skipped.
+pub fn run_observed(
+    scenario: &Scenario,
+    progress: &mut dyn FnMut(u64),
+    observer: &mut dyn RunObserver,
+) -> Result<RunResult, SimError> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(scenario.seed);
     let motors: Vec<Box<dyn SimMotor>> = scenario
         .motors
@@ -131,9 +158,10 @@ pub fn run_with_progress(
     };
 
     let end_us = scenario.duration_ms * 1000;
-    let (mut next_plant, mut next_tick) = (0u64, 0u64);
+    let (mut next_plant, mut next_tick) = (0u64, after_scheduler_stall(scenario, 0));
+    let mut pacer = TickPacer::new(Duration::from_micros(TICK_US));
     let mut batch = TxBatch::new();
-    let mut samples = Vec::with_capacity(scenario.duration_ms as usize);
+    let mut samples = Vec::with_capacity(scenario.duration_ms.min(100_000) as usize);
     let mut next_step = vec![0usize; scenario.targets.len()];
     // Frames on their way to the controller under a delay fault: (arrival µs, frame).
     let mut delayed: std::collections::VecDeque<(u64, CanFrame)> = Default::default();
@@ -158,20 +186,36 @@ pub fn run_with_progress(
         let t_ms = t / 1000;
 
         // A frame ends on the wire: faults, then delivery to everyone but its sender.
-        if let Some((sender, frame)) = bus.complete(t) {
-            let to_mcu = deliver(scenario, &mut rng, &mut bus, &mut escs, sender, frame, t_ms);
+        if let Some((sender, frame, mcu_seq)) = bus.complete_with_seq(t) {
+            let (received, corrupted) =
+                deliver(scenario, &mut rng, &mut bus, &mut escs, sender, frame, t_ms);
+            observer.on_wire(&WireEvent {
+                t_us: t,
+                sender,
+                frame,
+                mcu_seq,
+                received,
+                corrupted,
+            });
+            let to_mcu = received.filter(|_| sender != Sender::Mcu);
             if let Some(frame) = to_mcu {
-                if rx_stalled(scenario, t_ms) {
+                if bus.mcu_bus_off() {
+                    observer.on_rx_dropped(t, &frame, RxDrop::BusOff);
+                } else if bus.mcu_no_ack() {
+                    observer.on_rx_dropped(t, &frame, RxDrop::NoAck);
+                } else if rx_stalled(scenario, t_ms) {
                     if rx_fifo.len() < RX_FIFO_DEPTH {
                         rx_fifo.push_back(frame);
                     } else {
                         rx_overruns += 1;
                         rc10.record_receive_error(ReceiveError::Overrun);
+                        observer.on_rx_dropped(t, &frame, RxDrop::Overrun);
                     }
                 } else {
                     match delay_us(scenario, t_ms) {
                         0 => {
-                            rc10.dispatch(&frame, Instant::from_micros(t));
+                            let r = rc10.dispatch(&frame, Instant::from_micros(t));
+                            observer.on_dispatch(t, &frame, r);
                         }
                         d => delayed.push_back((t + d, frame)),
                     }
@@ -181,7 +225,8 @@ pub fn run_with_progress(
         if !rx_stalled(scenario, t_ms) {
             // The receive path runs again: the FIFO drains now, in order.
             while let Some(frame) = rx_fifo.pop_front() {
-                rc10.dispatch(&frame, Instant::from_micros(t));
+                let r = rc10.dispatch(&frame, Instant::from_micros(t));
+                observer.on_dispatch(t, &frame, r);
             }
         }
         while let Some(&(d, frame)) = delayed.front() {
@@ -189,8 +234,11 @@ pub fn run_with_progress(
                 break;
             }
             delayed.pop_front();
-            if !bus.mcu_bus_off() {
-                rc10.dispatch(&frame, Instant::from_micros(d));
+            if bus.mcu_bus_off() {
+                observer.on_rx_dropped(d, &frame, RxDrop::BusOff);
+            } else {
+                let r = rc10.dispatch(&frame, Instant::from_micros(d));
+                observer.on_dispatch(d, &frame, r);
             }
         }
 
@@ -241,9 +289,15 @@ pub fn run_with_progress(
                 ),
                 _ => None,
             };
-            rc10.tick(now, TICK_US as f32 * 1e-6, &mut batch);
-            rc10.transmit(&batch, &mut bus.mcu_port());
-            samples.push(Sample {
+            let paced = pacer.on_tick(now);
+            if paced.resync {
+                rc10.record_skipped_ticks(paced.skipped);
+            }
+            let held_before = bus.mcu_pending();
+            let first_seq = bus.next_mcu_seq();
+            rc10.tick(now, paced.dt_s, &mut batch);
+            let report = rc10.transmit(&batch, &mut bus.mcu_port());
+            let sample = Sample {
                 t_ms,
                 motors: motors
                     .iter()
@@ -264,8 +318,22 @@ pub fn run_with_progress(
                     })
                     .collect(),
                 chassis,
+            };
+            observer.on_tick(&TickEvent {
+                t_us: t,
+                paced,
+                sample: &sample,
+                batch: &batch,
+                report,
+                held_before,
+                first_seq,
+                bus_off: bus.mcu_bus_off(),
+                no_ack: bus.mcu_no_ack(),
             });
-            next_tick += TICK_US;
+            if observer.keep_sample(t_ms) {
+                samples.push(sample);
+            }
+            next_tick = after_scheduler_stall(scenario, next_tick + TICK_US);
             if t_ms % 1000 == 999 {
                 progress(t_ms + 1);
             }
@@ -292,8 +360,9 @@ pub fn run_with_progress(
     })
 }
 
-/// Applies loss and corruption to a frame that ended on the wire, hands it to the ESCs, and
-/// returns it if the controller receives it.
+/// Applies loss and corruption to a frame that ended on the wire and hands it to the ESCs.
+/// Returns the frame as the other nodes received it (`None` if lost) and whether it was
+/// corrupted.
 fn deliver(
     scenario: &Scenario,
     rng: &mut Xoshiro256PlusPlus,
@@ -302,8 +371,9 @@ fn deliver(
     sender: Sender,
     frame: CanFrame,
     t_ms: u64,
-) -> Option<CanFrame> {
+) -> (Option<CanFrame>, bool) {
     let mut frame = frame;
+    let mut corrupted = false;
     for fault in &scenario.faults {
         match *fault {
             Fault::FrameLoss {
@@ -312,7 +382,7 @@ fn deliver(
                 to_ms,
             } if in_window(t_ms, from_ms, to_ms) && uniform(rng) < probability => {
                 bus.record_lost();
-                return None;
+                return (None, corrupted);
             }
             Fault::Corruption {
                 probability,
@@ -328,6 +398,7 @@ fn deliver(
                     CanFrame::new(frame.id(), frame.data().get(..cut).unwrap_or(&[]))
                 {
                     frame = short;
+                    corrupted = true;
                 }
             }
             _ => {}
@@ -338,7 +409,7 @@ fn deliver(
             esc.on_frame(&frame);
         }
     }
-    (sender != Sender::Mcu && !bus.mcu_bus_off()).then_some(frame)
+    (Some(frame), corrupted)
 }
 
 #[cfg(test)]
@@ -357,5 +428,85 @@ mod tests {
         assert_eq!(config.mcu_tx_order, TxOrder::LowestIdFirst);
         assert_eq!(config.bitrate_bps, 500_000);
         assert_eq!(config.mcu_tx_depth, SimBusConfig::default().mcu_tx_depth);
+    }
+
+    fn speed_step_with(faults: Vec<Fault>, duration_ms: u64) -> RunResult {
+        let mut scenario = builtin().swap_remove(0);
+        scenario.faults = faults;
+        scenario.duration_ms = duration_ms;
+        run(&scenario).unwrap()
+    }
+
+    #[test]
+    fn without_acknowledgement_frames_stay_queued_and_the_motor_goes_offline_and_returns() {
+        let r = speed_step_with(
+            vec![Fault::NoAck {
+                from_ms: 200,
+                to_ms: 450,
+            }],
+            700,
+        );
+        assert_eq!(r.offline_events, vec![1]);
+        let c = r.counters;
+        // One command frame per tick. Ticks 200-202 fill the 3 TX buffers; ticks 203-450 find
+        // them full (at 450 the held frames have not left yet): 248 refused. Each tick from
+        // 201 on finds 1, 2, then 3 frames still queued; an ACK error is read at each tick
+        // from 201 to 449.
+        assert_eq!(c.tx_full, 248);
+        assert_eq!(c.tx_stale, 1 + 2 + 3 * 248);
+        assert_eq!(c.bus_errors, 249);
+        assert_eq!(r.bus.mcu_tx_full, 248);
+        let at = |t_ms: u64| r.samples.iter().find(|s| s.t_ms == t_ms).unwrap().motors[0];
+        assert!(at(299).online && !at(302).online && !at(449).online);
+        assert!(at(455).online);
+        assert!(
+            (at(699).true_rpm - 300.0).abs() < 2.0,
+            "{}",
+            at(699).true_rpm
+        );
+    }
+
+    #[test]
+    fn a_scheduler_stall_skips_the_missed_ticks_instead_of_running_them() {
+        let r = speed_step_with(
+            vec![Fault::SchedulerStall {
+                from_ms: 100,
+                to_ms: 120,
+            }],
+            400,
+        );
+        assert_eq!((r.counters.ticks, r.counters.ticks_skipped), (380, 20));
+        let ticks: Vec<u64> = r.samples.iter().map(|s| s.t_ms).collect();
+        assert!(ticks.contains(&99) && ticks.contains(&120) && ticks.contains(&121));
+        assert!(!ticks.iter().any(|t| (100..120).contains(t)));
+    }
+
+    #[test]
+    fn every_window_of_a_repeated_fault_takes_effect() {
+        let r = speed_step_with(
+            vec![
+                Fault::BusOff {
+                    from_ms: 100,
+                    to_ms: 250,
+                },
+                Fault::BusOff {
+                    from_ms: 400,
+                    to_ms: 550,
+                },
+                Fault::PowerCut {
+                    motor: 0,
+                    from_ms: 700,
+                    to_ms: 850,
+                },
+                Fault::PowerCut {
+                    motor: 0,
+                    from_ms: 1_000,
+                    to_ms: 1_150,
+                },
+            ],
+            1_300,
+        );
+        assert_eq!(r.counters.bus_off_events, 2);
+        assert_eq!(r.offline_events, vec![4]);
     }
 }
