@@ -174,6 +174,10 @@ pub struct LinearChassis<const N: usize> {
 impl<const N: usize> LinearChassis<N> {
     /// A chassis from explicit rows `[kx, ky, kω]` (rim speed = kx·vx + ky·vy + kω·ω),
     /// wheel radius and per-wheel signs.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn from_rows(
         rows: [[f32; 3]; N],
         wheel_radius_m: f32,
@@ -200,6 +204,10 @@ impl<const N: usize> LinearChassis<N> {
     }
 
     /// Output-shaft rpm of every wheel for `twist`. A non-finite twist gives all zeros.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn wheel_rpm(&self, twist: Twist) -> [f32; N] {
         let mut out = [0.0; N];
         if !twist.is_finite() {
@@ -223,6 +231,10 @@ impl<const N: usize> LinearChassis<N> {
 
     /// The twist the wheels produce (odometry): least squares over all wheels. Non-finite
     /// wheel speeds give [`Twist::ZERO`].
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn twist(&self, wheel_rpm: &[f32; N]) -> Twist {
         if wheel_rpm.iter().any(|w| !w.is_finite()) {
             return Twist::ZERO;
@@ -321,6 +333,10 @@ pub struct Swerve {
 
 impl Swerve {
     /// Modules at the corners of a `wheelbase_m` × `track_m` rectangle.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn new(wheelbase_m: f32, track_m: f32, wheel_radius_m: f32) -> Result<Self, ChassisError> {
         let a = positive(wheelbase_m)? / 2.0;
         let b = positive(track_m)? / 2.0;
@@ -392,6 +408,10 @@ impl Swerve {
     }
 
     /// The twist measured module states produce (odometry, least squares).
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn twist(&self, modules: &[ModuleState; 4]) -> Twist {
         if modules
             .iter()

@@ -189,12 +189,11 @@ impl Encoder {
         {
             return None;
         }
-        let per_turn = config.counts_per_rev as i64 * config.gear.rotor_turns as i64;
         Some(Self {
             config,
             last_raw: None,
             total_counts: 0,
-            deg_per_unit_bits: (360.0 / per_turn as f32).to_bits(),
+            deg_per_unit_bits: (360.0 / units_per_turn(&config) as f32).to_bits(),
         })
     }
 
@@ -233,33 +232,32 @@ impl Encoder {
         raw: u16,
         predicted_counts: f32,
     ) -> Result<(), EncoderError> {
-        let n = i64::from(self.config.counts_per_rev);
-        if i64::from(raw) >= n {
+        let cpr = self.config.counts_per_rev;
+        if raw >= cpr {
             return Err(EncoderError::OutOfRange { raw });
         }
         match self.last_raw {
             Some(last) => {
-                let step = wrap_counts(i64::from(raw) - i64::from(last), n);
+                let step = wrapped_step(raw, last, cpr);
                 // 32-bit conversions (one instruction; the 64-bit ones are library calls).
-                let nf = f32::from(self.config.counts_per_rev);
+                let nf = f32::from(cpr);
                 let off = if predicted_counts.is_finite() {
                     predicted_counts - to_f32(step)
                 } else {
                     0.0
                 };
-                let turns = if off.abs() * 2.0 < nf {
-                    0 // the usual case: the prediction agrees with the half-turn rule
+                let step = if off.abs() * 2.0 < nf {
+                    step // the usual case: the prediction agrees with the half-turn rule
                 } else {
-                    // Bounded so that even an absurd prediction cannot overflow the count.
-                    libm::roundf(off / nf).clamp(-1.0e6, 1.0e6) as i64
+                    plus_whole_turns(step, off / nf, cpr)
                 };
-                self.total_counts = self.total_counts.saturating_add(step + turns * n);
+                self.total_counts = self.total_counts.saturating_add(step);
             }
             None => {
                 self.total_counts = match self.config.origin {
                     Origin::PowerOn => 0,
                     Origin::Absolute { zero_offset_counts } => {
-                        wrap_counts(i64::from(raw) - i64::from(zero_offset_counts), n)
+                        wrapped_step(raw, zero_offset_counts, cpr)
                     }
                 };
             }
@@ -294,8 +292,7 @@ impl Encoder {
     /// integer arithmetic: `i64` (cheap on a Cortex-M4), or `i128` only if the product could
     /// overflow, which takes thousands of years of continuous rotation.
     fn output_position(&self) -> (i64, i64, i64) {
-        let per_turn =
-            i64::from(self.config.counts_per_rev) * i64::from(self.config.gear.rotor_turns);
+        let per_turn = units_per_turn(&self.config);
         match self
             .total_counts
             .checked_mul(i64::from(self.config.gear.output_turns))
@@ -306,6 +303,10 @@ impl Encoder {
                 per_turn,
             ),
             None => {
+                #[allow(
+                    clippy::arithmetic_side_effects,
+                    reason = "i64 × u32 is below 2^95: fits i128"
+                )]
                 let scaled =
                     i128::from(self.total_counts) * i128::from(self.config.gear.output_turns);
                 let per = i128::from(per_turn);
@@ -393,30 +394,34 @@ impl Encoder {
         counts_per_period: f32,
         gap_periods: f32,
     ) -> Result<(), EncoderError> {
-        let n = i64::from(self.config.counts_per_rev);
+        let cpr = self.config.counts_per_rev;
         let (Some(last), true) = (
             self.last_raw,
             counts_per_period.is_finite() && gap_periods.is_finite(),
         ) else {
             return self.update_predicted(raw, 0.0);
         };
-        if i64::from(raw) >= n {
+        if raw >= cpr {
             return Err(EncoderError::OutOfRange { raw });
         }
-        let nf = f32::from(self.config.counts_per_rev);
+        let nf = f32::from(cpr);
         let gap = gap_periods.clamp(1.0, 1.0e6);
         // At most ±2 periods around the measured gap: the whole window moves the rotor by less
         // than a quarter turn, so every candidate gives the same turn count.
         if counts_per_period.abs() * 4.0 < nf * 0.25 {
             return self.update_predicted(raw, counts_per_period * gap);
         }
-        let d0 = wrap_counts(i64::from(raw) - i64::from(last), n);
+        let d0 = wrapped_step(raw, last, cpr);
         let centre = libm::roundf(gap) as i64;
+        #[allow(
+            clippy::arithmetic_side_effects,
+            reason = "centre is within [1, 10^6]: gap is clamped"
+        )]
+        let window = (centre - 2).max(1)..=centre + 2;
         let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
-        for m in (centre - 2).max(1)..=centre + 2 {
+        for m in window {
             let predicted = counts_per_period * to_f32(m);
-            let turns = libm::roundf((predicted - to_f32(d0)) / nf).clamp(-1.0e6, 1.0e6) as i64;
-            let step = d0 + turns * n;
+            let step = plus_whole_turns(d0, (predicted - to_f32(d0)) / nf, cpr);
             let residual = (to_f32(step) - predicted).abs();
             let distance = (to_f32(m) - gap).abs();
             let better = match best {
@@ -455,9 +460,12 @@ impl Encoder {
         }
         self.total_counts = counts as i64;
         if let Origin::Absolute { .. } = self.config.origin {
-            let offset = (i64::from(raw) - self.total_counts).rem_euclid(n);
+            // Never fails: |total_counts| ≤ 10^15 (checked above), and the remainder is < n.
+            let offset = i64::from(raw)
+                .checked_sub(self.total_counts)
+                .map(|d| d.rem_euclid(n));
             self.config.origin = Origin::Absolute {
-                zero_offset_counts: u16::try_from(offset).unwrap_or(0),
+                zero_offset_counts: offset.and_then(|o| u16::try_from(o).ok()).unwrap_or(0),
             };
         }
         true
@@ -475,10 +483,25 @@ impl Encoder {
 /// counts (1/32 of a DJI rotor turn) are taken as equally good.
 const AMBIGUOUS_COUNTS: f32 = 256.0;
 
-/// Wraps a count difference into `[-n/2, n/2)`. `delta` is a difference of two readings
-/// below `n`, so it lies in `(-n, n)` and one correction suffices: no division (an `i64`
+/// Units of [`Encoder::output_position`]'s remainder per output-shaft turn:
+/// `counts_per_rev · rotor_turns`.
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "u16 × u32 is below 2^48: fits i64"
+)]
+const fn units_per_turn(config: &EncoderConfig) -> i64 {
+    config.counts_per_rev as i64 * config.gear.rotor_turns as i64
+}
+
+/// The step from reading `from` to reading `to`, both below `n`, wrapped into `[-n/2, n/2)`.
+/// The difference lies in `(-n, n)`, so one correction suffices: no division (an `i64`
 /// remainder is a library call on the Cortex-M4).
-fn wrap_counts(delta: i64, n: i64) -> i64 {
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "u16 readings and count widened to i64: every value is within ±2^17"
+)]
+fn wrapped_step(to: u16, from: u16, n: u16) -> i64 {
+    let (delta, n) = (i64::from(to) - i64::from(from), i64::from(n));
     let half = n / 2;
     if delta >= n - half {
         delta - n
@@ -487,6 +510,16 @@ fn wrap_counts(delta: i64, n: i64) -> i64 {
     } else {
         delta
     }
+}
+
+/// `step` plus the whole number of rotor turns nearest `turns`, clamped to ±10⁶ turns so that
+/// even an absurd prediction cannot overflow the count.
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "step is a wrapped_step (|step| ≤ 2^15), |turns| ≤ 10^6, n < 2^16: below 2^37"
+)]
+fn plus_whole_turns(step: i64, turns: f32, n: u16) -> i64 {
+    step + libm::roundf(turns).clamp(-1.0e6, 1.0e6) as i64 * i64::from(n)
 }
 
 #[cfg(test)]

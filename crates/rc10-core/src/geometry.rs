@@ -118,16 +118,28 @@ impl Transform2D {
     }
 
     /// Maps a point.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn apply(&self, point: Point2) -> Point2 {
         self.0 * point
     }
 
     /// Rotates a vector (a velocity, say) without translating it.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn apply_vector(&self, v: Vector2<f32>) -> Vector2<f32> {
         self.0 * v
     }
 
     /// `self ∘ other`: first `other`, then `self`.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn compose(&self, other: &Self) -> Self {
         Self(self.0 * other.0)
     }
@@ -177,16 +189,28 @@ impl Transform3D {
     }
 
     /// Maps a point.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn apply(&self, point: Point3) -> Point3 {
         self.0 * point
     }
 
     /// Rotates a vector without translating it.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn apply_vector(&self, v: Vector3<f32>) -> Vector3<f32> {
         self.0 * v
     }
 
     /// `self ∘ other`: first `other`, then `self`.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "nalgebra f32 product: no integer overflow"
+    )]
     pub fn compose(&self, other: &Self) -> Self {
         Self(self.0 * other.0)
     }

@@ -2,6 +2,10 @@
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+// Every integer operation that could overflow, divide by zero or panic is written as
+// wrapping, saturating or checked, or is allowed locally with its bound as the reason (see
+// the README's "Panic-free" section). Unit tests may use plain arithmetic.
+#![cfg_attr(not(test), deny(clippy::arithmetic_side_effects))]
 
 pub mod bus;
 pub mod can;

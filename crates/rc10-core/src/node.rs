@@ -93,12 +93,16 @@ impl IdSet {
     pub const fn with(mut self, filter: IdFilter) -> Self {
         let at = self.len as usize;
         if at < ID_SET_CAPACITY {
-            // In bounds (checked on the line above); `get_mut` is not callable in a const fn.
-            #[allow(clippy::indexing_slicing)]
+            // `get_mut` is not callable in a const fn.
+            #[allow(
+                clippy::indexing_slicing,
+                clippy::arithmetic_side_effects,
+                reason = "at = len < ID_SET_CAPACITY (checked on the line above)"
+            )]
             {
                 self.filters[at] = filter;
+                self.len += 1;
             }
-            self.len += 1;
         } else {
             self.overflowed = true;
         }
@@ -297,7 +301,6 @@ impl TxBatch {
     /// same ID is never written into (registration rejects that clash; should it happen
     /// anyway, the two frames stay separate).
     pub fn write_slot(&mut self, slot: CommandSlot, value: i16) -> bool {
-        let at = 2 * usize::from(slot.index);
         let slot_frames = self.slot_frames;
         let existing = self
             .frames
@@ -313,7 +316,7 @@ impl TxBatch {
                 };
                 let index = self.frames.len();
                 if self.frames.push(fresh).is_err() {
-                    self.overflowed += 1;
+                    self.count_overflow();
                     return false;
                 }
                 self.slot_frames |= 1 << index;
@@ -323,23 +326,35 @@ impl TxBatch {
                 }
             }
         };
-        if let Some(bytes) = frame.buffer_mut().get_mut(at..at + 2) {
-            bytes.copy_from_slice(&value.to_be_bytes());
+        // Slot `index` is bytes 2·index and 2·index + 1.
+        let (pairs, _) = frame.buffer_mut().as_chunks_mut::<2>();
+        if let Some(pair) = pairs.get_mut(usize::from(slot.index)) {
+            *pair = value.to_be_bytes();
         }
         true
+    }
+
+    /// Counts a frame that did not fit. Saturating: the count is cleared every tick and can
+    /// reach at most the frames one tick packs, but it must never wrap to a small number.
+    fn count_overflow(&mut self) {
+        self.overflowed = self.overflowed.saturating_add(1);
     }
 
     /// Appends a whole frame; hands it back (and counts an overflow) if the batch is full.
     pub fn push(&mut self, frame: CanFrame) -> Result<(), CanFrame> {
         self.frames
             .push(frame)
-            .inspect_err(|_| self.overflowed += 1)
+            .inspect_err(|_| self.count_overflow())
     }
 
     /// Drops the whole frames packed at index `from` and after that a node did not declare:
     /// beyond `frames_per_tick` of them, or on an ID outside `sends` (slot frames are left
     /// alone). Returns how many were dropped. The bus calls this after each node's
     /// `pack_command`, so a node can never send what registration did not check.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "i < frames.len() ≤ MAX_FRAMES_PER_TICK = 16 and dropped ≤ i"
+    )]
     pub fn keep_declared(&mut self, from: usize, frames_per_tick: u8, sends: &IdSet) -> u32 {
         let mut whole = 0u8;
         let mut dropped = 0u32;

@@ -19,6 +19,9 @@ use core::sync::atomic::{AtomicU32, Ordering};
 /// The four bytes VOFA+ JustFloat puts after every frame (the bit pattern of +inf).
 pub const JUSTFLOAT_TAIL: [u8; 4] = [0x00, 0x00, 0x80, 0x7f];
 
+/// The most digits after the point [`firewater`] writes (the limit of Rust's formatter).
+pub const MAX_DECIMALS: usize = u16::MAX as usize;
+
 /// The output buffer is too small.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -42,9 +45,12 @@ impl core::error::Error for BufferTooSmall {}
 /// Encodes `values` as one JustFloat frame (little-endian f32s, then the tail) into `out`;
 /// returns the bytes written.
 pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
-    let needed = 4 * values.len() + 4;
+    // 4 bytes per value; a slice never spans more than isize::MAX bytes, so the sum does not
+    // saturate.
+    let data_len = core::mem::size_of_val(values);
+    let needed = data_len.saturating_add(JUSTFLOAT_TAIL.len());
     let frame = out.get_mut(..needed).ok_or(BufferTooSmall { needed })?;
-    let (data, tail) = frame.split_at_mut(4 * values.len());
+    let (data, tail) = frame.split_at_mut(data_len);
     for (chunk, v) in data.as_chunks_mut::<4>().0.iter_mut().zip(values) {
         chunk.copy_from_slice(&v.to_le_bytes());
     }
@@ -53,14 +59,17 @@ pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall
 }
 
 /// Encodes `values` as one FireWater line, `prefix:v1,v2,...\n` (no `prefix:` if `prefix` is
-/// empty), with `decimals` digits after the point; returns the bytes written. NaN and infinity
-/// are written as `nan` / `inf`, which VOFA+ shows as gaps rather than misreading them.
+/// empty), with `decimals` digits after the point (at most [`MAX_DECIMALS`]; more are taken
+/// as that); returns the bytes written. NaN and infinity are written as `nan` / `inf`, which
+/// VOFA+ shows as gaps rather than misreading them.
 pub fn firewater(
     prefix: &str,
     values: &[f32],
     decimals: usize,
     out: &mut [u8],
 ) -> Result<usize, BufferTooSmall> {
+    // Rust's formatter panics on a precision beyond u16::MAX.
+    let decimals = decimals.min(MAX_DECIMALS);
     let mut w = SliceWriter {
         out,
         len: 0,
@@ -81,7 +90,10 @@ pub fn firewater(
     }
     let _ = w.write_str("\n");
     if w.overflow {
-        Err(BufferTooSmall { needed: w.len + 1 })
+        // `len` kept counting past the end of `out`.
+        Err(BufferTooSmall {
+            needed: w.len.saturating_add(1),
+        })
     } else {
         Ok(w.len)
     }
@@ -95,7 +107,8 @@ struct SliceWriter<'a> {
 
 impl fmt::Write for SliceWriter<'_> {
     fn write_str(&mut self, s: &str) -> fmt::Result {
-        let end = self.len + s.len();
+        // Saturates (a line longer than memory is reported as needing usize::MAX bytes).
+        let end = self.len.saturating_add(s.len());
         match self.out.get_mut(self.len..end) {
             Some(dst) if !self.overflow => {
                 dst.copy_from_slice(s.as_bytes());
@@ -211,6 +224,19 @@ mod tests {
         let n = firewater("", &[1.0], 0, &mut buf).unwrap();
         assert_eq!(&buf[..n], b"1\n");
         assert!(firewater("x", &[123456.0], 3, &mut buf[..8]).is_err());
+    }
+
+    #[test]
+    fn firewater_decimals_beyond_the_formatter_limit_are_capped_not_a_panic() {
+        // core::fmt panics on a precision above u16::MAX ("Formatting argument out of range").
+        let mut buf = vec![0u8; MAX_DECIMALS + 4];
+        let n = firewater("", &[1.0], usize::MAX, &mut buf).unwrap();
+        assert_eq!(n, MAX_DECIMALS + 3); // "1." + the digits + "\n"
+        let mut small = [0u8; 8];
+        let needed = firewater("", &[1.0], usize::MAX, &mut small)
+            .unwrap_err()
+            .needed;
+        assert!(needed > 8, "needed {needed}"); // at least (formatting stops at the error)
     }
 
     #[test]

@@ -75,7 +75,8 @@ impl DeltaTime {
     pub fn update(&mut self, now: Instant) -> f32 {
         let dt_us = match self.last {
             Some(last) if now > last => {
-                let elapsed = now.as_micros() - last.as_micros();
+                // `now > last`: never saturates.
+                let elapsed = now.as_micros().saturating_sub(last.as_micros());
                 elapsed.clamp(self.min_us, self.max_us)
             }
             _ => self.nominal_us,

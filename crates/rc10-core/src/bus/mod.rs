@@ -47,6 +47,7 @@ use crate::node::{CanNode, CommandSlot, IdSet, MAX_FRAMES_PER_TICK, TxBatch};
 use crate::time::{DeltaTime, Duration, Instant};
 use core::cell::RefCell;
 use core::fmt;
+use core::num::NonZeroU64;
 use core::sync::atomic::{AtomicU8, Ordering};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -548,22 +549,26 @@ impl<'a, const N: usize> Bus<'a, N> {
         let start = usize::from(self.first_refused.load(Ordering::Relaxed));
         let start = if start < frames.len() { start } else { 0 };
         let (tail, head) = frames.split_at(start);
+        // Each frame with its index in the batch.
+        let rotated = head.iter().zip(start..).chain(tail.iter().zip(0..));
         let mut first_refused = None;
-        for (i, frame) in head.iter().chain(tail).enumerate() {
+        // The report's counts are bounded by the batch (at most MAX_FRAMES_PER_TICK frames);
+        // they saturate rather than wrap all the same.
+        for (frame, index) in rotated {
             match tx.try_send(frame) {
                 Ok(()) => {
                     self.stats.record_tx(timing::unstuffed_bits(frame));
-                    report.queued += 1;
+                    report.queued = report.queued.saturating_add(1);
                 }
                 Err(SendError::Full) => {
                     self.stats.record_tx_full();
-                    report.full += 1;
-                    first_refused.get_or_insert((start + i) % frames.len());
+                    report.full = report.full.saturating_add(1);
+                    first_refused.get_or_insert(index);
                 }
                 Err(SendError::BusOff) => {
                     self.stats.record_tx_bus_off();
                     bus_off = true;
-                    report.bus_off += 1;
+                    report.bus_off = report.bus_off.saturating_add(1);
                 }
             }
         }
@@ -689,7 +694,8 @@ pub struct PacedTick {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TickPacer {
-    period: Duration,
+    /// The period in ticks: never zero, so dividing by it cannot fail.
+    period: NonZeroU64,
     next_due: Option<Instant>,
     dt: DeltaTime,
 }
@@ -697,17 +703,19 @@ pub struct TickPacer {
 impl TickPacer {
     /// A pacer for ticks every `period` (zero is raised to 1 µs).
     pub const fn new(period: Duration) -> Self {
-        let period = if period.as_ticks() == 0 {
-            Duration::from_micros(1)
-        } else {
-            period
+        let period = match NonZeroU64::new(period.as_ticks()) {
+            Some(ticks) => ticks,
+            None => match NonZeroU64::new(Duration::from_micros(1).as_ticks()) {
+                Some(ticks) => ticks,
+                None => NonZeroU64::MIN, // unreachable: 1 µs rounds up to at least one tick
+            },
         };
         Self {
             period,
             next_due: None,
             dt: DeltaTime::new(
-                period,
-                Duration::from_ticks(period.as_ticks().saturating_mul(10)),
+                Duration::from_ticks(period.get()),
+                Duration::from_ticks(period.get().saturating_mul(10)),
             ),
         }
     }
@@ -718,18 +726,21 @@ impl TickPacer {
             // The first tick: align the source with the pacer.
             None => (true, 0),
             Some(due) => {
-                let late = now.saturating_duration_since(due);
-                if late.as_ticks() * 2 >= self.period.as_ticks() {
-                    let missed = late.as_ticks() / self.period.as_ticks();
+                let late = now.saturating_duration_since(due).as_ticks();
+                // `late · 2 ≥ period`, without overflowing for a timestamp far ahead.
+                if late >= self.period.get().div_ceil(2) {
+                    let missed = late / self.period;
                     (true, u32::try_from(missed).unwrap_or(u32::MAX))
                 } else {
                     (false, 0)
                 }
             }
         };
+        // Saturates at the end of time (u64 ticks) instead of panicking.
+        let period = Duration::from_ticks(self.period.get());
         self.next_due = Some(match (resync, self.next_due) {
-            (false, Some(due)) => due + self.period,
-            _ => now + self.period,
+            (false, Some(due)) => due.saturating_add(period),
+            _ => now.saturating_add(period),
         });
         PacedTick {
             dt_s: self.dt.update(now),

@@ -579,6 +579,22 @@ fn pacer_skips_ticks_missed_in_a_stall_and_bounds_dt() {
     assert_eq!(resumed.dt_s, 0.001);
 }
 
+#[test]
+fn pacer_near_the_end_of_time_saturates_instead_of_panicking() {
+    // Were panics (debug) or a missed resync (release): `late · 2` overflowed for a stamp
+    // 2^63 ticks ahead, and `now + period` for one within a period of u64::MAX.
+    let mut pacer = TickPacer::new(Duration::from_millis(1));
+    pacer.on_tick(Instant::from_ticks(1_000));
+    let far = pacer.on_tick(Instant::from_ticks((1 << 63) + 2_000)); // 2^63 ticks late
+    assert_eq!((far.resync, far.skipped), (true, u32::MAX));
+    let end = pacer.on_tick(Instant::from_ticks(u64::MAX));
+    assert!(end.resync);
+    // Due at u64::MAX (saturated): a tick there again is on time, not late or a panic.
+    let again = pacer.on_tick(Instant::from_ticks(u64::MAX));
+    assert_eq!((again.resync, again.skipped), (false, 0));
+    assert_eq!(again.dt_s, 0.001); // time stood still: the nominal period
+}
+
 /// An embassy-time `Ticker` over a fake clock: fires at `due`, then `due += period`; a tick
 /// that is already overdue fires at once (so ticks missed in a stall come back to back, as
 /// they do with the real `Ticker`). After `limit` ticks it never fires again.

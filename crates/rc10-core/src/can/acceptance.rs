@@ -149,7 +149,8 @@ impl<const S: usize, const E: usize> FilterPlan<S, E> {
             let f = usize::from(load_hz[1] < load_hz[0]);
             let fifo = if f == 0 { Fifo::Fifo0 } else { Fifo::Fifo1 };
             if let Some(load) = load_hz.get_mut(f) {
-                *load += u64::from(usage.feedback_hz);
+                // Only compared between the FIFOs: saturating is as good as exact here.
+                *load = load.saturating_add(u64::from(usage.feedback_hz));
             }
             for filter in usage.listen.filters() {
                 plan.add(filter, fifo, f, &mut needed, &mut open);
@@ -212,18 +213,15 @@ impl<const S: usize, const E: usize> FilterPlan<S, E> {
             }
         };
         if let Some(n) = needed.get_mut(kind) {
-            *n += 1;
+            *n = n.saturating_add(1);
         }
+        // The index the element takes if it fits.
         let pushed = if filter.extended {
-            self.extended
-                .push(element)
-                .is_ok()
-                .then(|| self.extended.len() - 1)
+            let at = self.extended.len();
+            self.extended.push(element).is_ok().then_some(at)
         } else {
-            self.standard
-                .push(element)
-                .is_ok()
-                .then(|| self.standard.len() - 1)
+            let at = self.standard.len();
+            self.standard.push(element).is_ok().then_some(at)
         };
         if exact
             && let Some(at) = pushed

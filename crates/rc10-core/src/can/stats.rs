@@ -283,16 +283,17 @@ impl RateWindow {
         window: Duration,
         bitrate_bps: u32,
     ) {
-        match self.start {
-            Some((t0, c0)) if now >= t0 => {
-                let elapsed = now - t0;
-                if elapsed >= window {
-                    let c = counters();
-                    self.latched = c.since(&c0).rates(elapsed, bitrate_bps);
-                    self.start = Some((now, c));
-                }
+        if let Some((t0, c0)) = self.start
+            && let Some(elapsed) = now.checked_duration_since(t0)
+        {
+            if elapsed >= window {
+                let c = counters();
+                self.latched = c.since(&c0).rates(elapsed, bitrate_bps);
+                self.start = Some((now, c));
             }
-            _ => self.start = Some((now, counters())),
+        } else {
+            // The first tick, or time went backwards: a new window starts.
+            self.start = Some((now, counters()));
         }
     }
 }

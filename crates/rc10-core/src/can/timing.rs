@@ -24,6 +24,10 @@ const UNSTUFFED_TAIL_BITS: u32 = 13;
 /// assert_eq!(timing::unstuffed_bits(&CanFrame::standard(0x200, &[0; 8]).unwrap()), 111);
 /// assert_eq!(timing::unstuffed_bits(&CanFrame::extended(0x901, &[0; 8]).unwrap()), 131);
 /// ```
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "a classic frame has at most 8 data bytes: at most 131 bits"
+)]
 pub fn unstuffed_bits(frame: &CanFrame) -> u32 {
     let header = if frame.is_extended() { 67 } else { 47 };
     header + 8 * frame.data().len() as u32
@@ -35,6 +39,10 @@ pub fn unstuffed_bits(frame: &CanFrame) -> u32 {
 /// use rc10_core::can::timing;
 /// assert_eq!(timing::worst_case_bits(false, 8), 135);
 /// ```
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "n ≤ 8 data bytes: every value is at most 160"
+)]
 pub fn worst_case_bits(extended: bool, data_len: usize) -> u32 {
     let n = data_len.min(8) as u32;
     let stuffable = if extended { 54 } else { 34 } + 8 * n;
@@ -51,6 +59,10 @@ pub fn worst_case_bits(extended: bool, data_len: usize) -> u32 {
 /// let bits = timing::frame_bits(&f);
 /// assert!(bits > 111 && bits <= 135); // zeros stuff heavily
 /// ```
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "at most 118 stuffable bits, 29 stuff bits and 13 tail bits"
+)]
 pub fn frame_bits(frame: &CanFrame) -> u32 {
     // The whole stuffed region (at most 103 bits + 15 CRC bits) as one MSB-first bit string.
     let mut bits = BitString::default();
@@ -94,6 +106,10 @@ struct BitString {
 }
 
 impl BitString {
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "frame_bits pushes at most 118 bits in all: len + count ≤ 128"
+    )]
     fn push(&mut self, value: u32, count: u32) {
         let v = u128::from(value) & ((1u128 << count) - 1);
         self.bits |= v << (128 - self.len - count);
@@ -105,29 +121,34 @@ impl BitString {
         (self.bits << at >> 120) as u8
     }
 
+    /// Bit `at` (< 128).
+    fn bit(&self, at: u32) -> bool {
+        self.bits << at >> 127 == 1
+    }
+
+    /// The positions of the whole bytes, then of the bits after them.
+    fn bytes_then_bits(&self) -> (impl Iterator<Item = u32>, core::ops::Range<u32>) {
+        let whole = self.len & !7;
+        ((0..whole).step_by(8), whole..self.len)
+    }
+
     /// CRC-15/CAN (polynomial 0x4599, initial 0) of all bits pushed so far.
     fn crc15(&self) -> u16 {
-        let mut crc = 0u16;
-        let mut at = 0;
-        while at + 8 <= self.len {
+        let (bytes, bits) = self.bytes_then_bits();
+        let crc = bytes.fold(0u16, |crc, at| {
             let index = usize::from(((crc >> 7) as u8) ^ self.byte_at(at));
             let entry = CRC15_TABLE.get(index).copied().unwrap_or(0); // index < 256 always
-            crc = ((crc << 8) ^ entry) & 0x7FFF;
-            at += 8;
-        }
-        while at < self.len {
-            crc = crc15_bit(crc, (self.bits >> (127 - at)) & 1 == 1);
-            at += 1;
-        }
-        crc
+            ((crc << 8) ^ entry) & 0x7FFF
+        });
+        bits.fold(crc, |crc, at| crc15_bit(crc, self.bit(at)))
     }
 
     /// Stuff bits the transmitter inserts into these bits.
     fn stuff_bits(&self) -> u32 {
+        let (bytes, bits) = self.bytes_then_bits();
         let mut state = STUFF_START;
-        let mut stuffed = 0;
-        let mut at = 0;
-        while at + 8 <= self.len {
+        let mut stuffed = 0u32; // at most 29
+        for at in bytes {
             // state < 16 and byte < 256 always.
             let entry = STUFF_TABLE
                 .get(usize::from(state))
@@ -135,14 +156,12 @@ impl BitString {
                 .copied()
                 .unwrap_or(0);
             state = entry & 0x0F;
-            stuffed += u32::from(entry >> 4);
-            at += 8;
+            stuffed = stuffed.saturating_add(u32::from(entry >> 4));
         }
-        while at < self.len {
-            let (next, stuff) = stuff_bit(state, (self.bits >> (127 - at)) & 1 == 1);
+        for at in bits {
+            let (next, stuff) = stuff_bit(state, self.bit(at));
             state = next;
-            stuffed += u32::from(stuff);
-            at += 1;
+            stuffed = stuffed.saturating_add(u32::from(stuff));
         }
         stuffed
     }
@@ -179,6 +198,10 @@ const CRC15_TABLE: [u16; 256] = {
 const STUFF_START: u8 = 0;
 
 /// Emits one bit; returns the new state and whether a stuff bit followed it.
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "run_len = state & 7 is at most 7"
+)]
 const fn stuff_bit(state: u8, bit: bool) -> (u8, bool) {
     let run_value = state >> 3 == 1;
     let run_len = state & 0x7;

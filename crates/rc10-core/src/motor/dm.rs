@@ -122,7 +122,7 @@ fn float_to_uint(x: f32, max: f32, bits: u32) -> u32 {
 /// Damiao's reference code does.
 fn to_uint(x: f32, min: f32, max: f32, bits: u32) -> u32 {
     let span = max - min;
-    let full = ((1u32 << bits) - 1) as f32;
+    let full = low_bits_mask(bits) as f32;
     if span.is_nan() || span <= 0.0 {
         return 0;
     }
@@ -130,8 +130,13 @@ fn to_uint(x: f32, min: f32, max: f32, bits: u32) -> u32 {
     constrain(scaled, 0.0, full) as u32
 }
 
+/// `2^bits - 1` for `bits` < 32 (the MIT fields are 12 and 16 bits wide).
+const fn low_bits_mask(bits: u32) -> u32 {
+    !(u32::MAX << bits)
+}
+
 fn uint_to_float(raw: u32, max: f32, bits: u32) -> f32 {
-    let full = ((1u32 << bits) - 1) as f32;
+    let full = low_bits_mask(bits) as f32;
     raw as f32 * (2.0 * max) / full - max
 }
 

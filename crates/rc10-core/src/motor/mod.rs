@@ -324,7 +324,9 @@ impl HealthConfig {
         match last {
             // A timestamp from the "future" (receiver stamped after the tick read the clock)
             // is fresh.
-            Some(t) => now <= t || now - t <= self.offline_timeout,
+            Some(t) => now
+                .checked_duration_since(t)
+                .is_none_or(|elapsed| elapsed <= self.offline_timeout),
             None => false,
         }
     }
@@ -359,12 +361,14 @@ impl Liveness {
     /// read the clock, or a bogus timestamp far in the future) is clamped to `now`: it counts
     /// as fresh for one offline timeout, never longer.
     pub fn check(&mut self, health: &HealthConfig, now: Instant) -> bool {
-        if let Some(t) = self.last_feedback
-            && t > now
-        {
-            self.last_feedback = Some(now);
-        }
-        let online = health.is_online(self.last_feedback, now);
+        let online = match self.last_feedback {
+            // A stamp at `now` or after it (clamped to `now`): fresh.
+            Some(t) if t >= now => {
+                self.last_feedback = Some(now);
+                true
+            }
+            last => health.is_online(last, now),
+        };
         let went_offline = self.online && !online;
         if went_offline {
             self.offline_events = self.offline_events.wrapping_add(1);

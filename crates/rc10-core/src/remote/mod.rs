@@ -81,10 +81,10 @@ impl<T: Copy> Link<T> {
 
     /// The value to act on at `now`.
     pub fn signal(&self, now: Instant) -> Signal<T> {
-        let fresh = match self.last_valid {
-            Some(t) => now <= t || now - t <= self.timeout,
-            None => false,
-        };
+        // A stamp after `now` is fresh: the elapsed time saturates to zero.
+        let fresh = self
+            .last_valid
+            .is_some_and(|t| now.saturating_duration_since(t) <= self.timeout);
         if fresh && !self.failsafe {
             Signal {
                 value: self.last,
@@ -145,7 +145,10 @@ impl<const N: usize> GapFramer<N> {
 
     /// Feeds one byte received at `now`.
     pub fn push(&mut self, byte: u8, now: Instant) -> Framed<N> {
-        let after_gap = self.last_byte.is_none_or(|t| now < t || now - t > self.gap);
+        // Time going backwards counts as a gap.
+        let after_gap = self
+            .last_byte
+            .is_none_or(|t| now.checked_duration_since(t).is_none_or(|d| d > self.gap));
         self.last_byte = Some(now);
         let truncated = after_gap && self.len > 0;
         if truncated {
@@ -153,7 +156,13 @@ impl<const N: usize> GapFramer<N> {
         }
         if let Some(slot) = self.buf.get_mut(self.len) {
             *slot = byte;
-            self.len += 1;
+            #[allow(
+                clippy::arithmetic_side_effects,
+                reason = "len < N: the slot at len exists"
+            )]
+            {
+                self.len += 1;
+            }
         }
         if self.len == N {
             self.len = 0;
@@ -337,8 +346,11 @@ impl<F: ReceiverFrame, const N: usize> Shared<FrameReceiver<F, N>> {
         let n = u32::try_from(bytes.len()).unwrap_or(u32::MAX);
         self.with(|r| {
             for (i, b) in (0u32..).zip(bytes) {
-                let back = byte_time * n.saturating_sub(1).saturating_sub(i);
-                let at = last_at.checked_sub(back).unwrap_or(Instant::from_ticks(0));
+                // Before the start of time (or an absurd byte time): stamped at time zero.
+                let at = byte_time
+                    .checked_mul(n.saturating_sub(1).saturating_sub(i))
+                    .and_then(|back| last_at.checked_sub(back))
+                    .unwrap_or(Instant::from_ticks(0));
                 let _ = r.push_byte(*b, at);
             }
         });
@@ -385,6 +397,9 @@ mod shared_tests {
         rx.push_bytes_ending_at(&frame, t3, byte);
         assert_eq!(rx.with(|r| r.link().frames()), 2);
         assert_eq!(rx.with(|r| r.link().errors()), 0);
+        // An absurd byte time stamps the earlier bytes at time zero instead of panicking in
+        // `Duration * u32` (it did).
+        rx.push_bytes_ending_at(&frame, t3, Duration::from_ticks(u64::MAX / 2));
         // Stamping every byte of a chunk with its read time would have split that frame.
         let naive: Shared<DbusReceiver> =
             Shared::new(DbusReceiver::new(Duration::from_millis(100)));
@@ -427,6 +442,19 @@ mod tests {
         assert_eq!(f.push(8, at(2200)), Framed::Pending);
         assert_eq!(f.push(7, at(2300)), Framed::Frame([9, 8, 7]));
         assert_eq!(f.push(6, at(2400)), Framed::Pending);
+    }
+
+    #[test]
+    fn stamps_at_the_ends_of_time_neither_panic_nor_wrap() {
+        let mut link = Link::new(0i32, Duration::from_millis(100));
+        link.accept(5, Instant::from_ticks(u64::MAX));
+        // A stamp after `now` is fresh.
+        assert_eq!(link.signal(Instant::from_ticks(0)).value, 5);
+        assert!(!link.signal(Instant::from_ticks(u64::MAX)).lost);
+        let mut f = GapFramer::<3>::new(Duration::from_millis(1));
+        assert_eq!(f.push(1, Instant::from_ticks(u64::MAX)), Framed::Pending);
+        // Time going backwards is a gap.
+        assert_eq!(f.push(2, Instant::from_ticks(0)), Framed::Truncated);
     }
 
     #[test]

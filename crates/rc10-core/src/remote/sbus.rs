@@ -57,12 +57,11 @@ impl SbusFrame {
         }
         let mut channels = [0u16; 16];
         let payload = &b[1..23];
-        for (i, ch) in channels.iter_mut().enumerate() {
-            let bit = 11 * i;
-            let byte = bit / 8;
-            let lo = payload.get(byte).copied().map_or(0, u32::from);
-            let mid = payload.get(byte + 1).copied().map_or(0, u32::from);
-            let hi = payload.get(byte + 2).copied().map_or(0, u32::from);
+        // Channel i is the 11 bits from bit 11·i, spread over up to three bytes.
+        for (ch, bit) in channels.iter_mut().zip((0usize..).step_by(11)) {
+            let bytes = payload.get(bit / 8..).unwrap_or(&[]);
+            let byte = |k: usize| bytes.get(k).copied().map_or(0, u32::from);
+            let (lo, mid, hi) = (byte(0), byte(1), byte(2));
             let word = lo | mid << 8 | hi << 16;
             *ch = ((word >> (bit % 8)) & 0x7FF) as u16;
         }

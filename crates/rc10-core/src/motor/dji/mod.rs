@@ -78,6 +78,10 @@ impl DjiModel {
     }
 
     /// Feedback ID for ESC `id`.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "0x204 + a u8 ID is at most 0x303: fits u16"
+    )]
     pub const fn feedback_id(self, id: u8) -> u16 {
         match self {
             Self::M3508 | Self::M2006 => 0x200 + id as u16,
@@ -87,15 +91,15 @@ impl DjiModel {
 
     /// Command frame ID and slot for ESC `id`; `None` if `id` is not in `1..=max_id()`.
     pub const fn command_slot(self, id: u8) -> Option<CommandSlot> {
-        if id < 1 || id > self.max_id() {
-            return None;
-        }
+        let zero_based = match id.checked_sub(1) {
+            Some(z) if id <= self.max_id() => z,
+            _ => return None,
+        };
         let (low, high) = match self {
             Self::M3508 | Self::M2006 => (0x200, 0x1FF),
             Self::Gm6020Voltage => (0x1FF, 0x2FF),
             Self::Gm6020Current => (0x1FE, 0x2FE),
         };
-        let zero_based = id - 1;
         CommandSlot::new(if zero_based < 4 { low } else { high }, zero_based % 4)
     }
 
@@ -573,11 +577,14 @@ impl DjiMotor {
             // only centre the search, as they may be read late. A stamp more than two periods
             // after the last tick is not trusted at all (a bogus or far-future stamp): the
             // interval is then taken as one period.
-            let trusted = s.last_tick.is_none_or(|tick| now <= tick + TRUST_AHEAD);
+            let trusted = s
+                .last_tick
+                .is_none_or(|tick| now.saturating_duration_since(tick) <= TRUST_AHEAD);
             let gap_periods = match s.liveness.last_feedback() {
                 Some(prev) if trusted && now > prev => {
                     // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
-                    u32::try_from((now - prev).as_micros()).unwrap_or(u32::MAX) as f32
+                    let gap = now.saturating_duration_since(prev);
+                    u32::try_from(gap.as_micros()).unwrap_or(u32::MAX) as f32
                         * (1.0 / FEEDBACK_PERIOD_US as f32)
                 }
                 _ => 1.0,

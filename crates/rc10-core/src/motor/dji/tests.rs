@@ -883,3 +883,17 @@ mod properties {
         }
     }
 }
+
+#[test]
+fn feedback_at_the_end_of_time_is_counted_not_a_panic() {
+    // Was a panic: the trust check added 2 ms to the last tick's stamp (`Instant + Duration`
+    // panics on overflow).
+    let m = DjiMotor::m3508(1).unwrap();
+    let id = m.model().feedback_id(1);
+    let end = Instant::from_ticks(u64::MAX);
+    m.update_feedback(&fb(id, 0, 0, 0, 30), end).unwrap();
+    tick(&m, end);
+    m.update_feedback(&fb(id, 100, 0, 0, 30), end).unwrap();
+    assert!(m.is_online());
+    assert!(m.total_angle_deg().unwrap() > 0.0);
+}
