@@ -223,9 +223,8 @@ proptest! {
                 prop_assert_eq!(t.d, last_d, "{:?}: derivative not held", t);
             }
             // Conditional integration: the integral never grows towards a saturated output
-            // (for limits above 1e-18: below, the direction test underflows, see
-            // `anti_windup_holds_with_a_tiny_output_limit`).
-            if unclamped && eff > 1e-18 && (i - held) * out > 0.0 {
+            // (at any scale: see `anti_windup_holds_with_a_tiny_output_limit`).
+            if unclamped && (i - held) * out > 0.0 {
                 prop_assert!(
                     (p + i + d + ff64).abs() <= eff * (1.0 + 1e-6) + 1e-6 * terms,
                     "{t:?}: integral grew from {held} while saturated at {eff}"
@@ -427,14 +426,11 @@ proptest! {
 }
 
 /// Found by `positional_pid_is_finite_limited_and_keeps_its_rules`: the anti-windup test
-/// `(candidate − integral) · unlimited > 0` multiplies two values of the size of the output
-/// limit; below about 1e-19 their product underflows to 0, the test says "not winding up",
-/// and the integral jumps to the limit while the output is saturated the same way. The same
-/// step scaled up (limit 1) holds the integral at 0, as documented. Harmless in practice (no
-/// real limit is that small), but the rule should not depend on the scale (comparing signs
-/// instead of multiplying would not underflow).
+/// used to multiply `(candidate − integral) · unlimited`, two values of the size of the
+/// output limit; below about 1e-19 the product underflowed to 0 and the integral jumped to
+/// the limit while the output was saturated the same way. It now compares signs; the same
+/// step holds the integral at 0 at every scale.
 #[test]
-#[ignore = "bug (negligible): anti-windup direction test underflows for output limits below ~1e-19"]
 fn anti_windup_holds_with_a_tiny_output_limit() {
     // kp 1e-4, ki 1000 /s, dt 1 ms, error −scale: P = −1e-4·scale, and the first integral
     // increment, 1000 · (−scale) · 0.001 = −scale, would take P + I beyond the limit `scale`.

@@ -268,9 +268,10 @@ impl Pid {
     /// power limiting). The smaller of `limit` and the configured
     /// [`output_limit`](PidConfig::output_limit) is the *effective* limit, and anti-windup
     /// works against it: the integral does not grow while the output is held there, and it is
-    /// kept within `±effective limit` (an integral beyond it is effort that cannot be
-    /// applied, and would make the output jump when the limit is lifted). A NaN or negative
-    /// `limit` counts as zero.
+    /// kept within `±(effective limit + |feed_forward|)` (what, with the feed-forward, can
+    /// reach the limit; beyond it is effort that cannot be applied, and would make the output
+    /// jump when the limit is lifted), and within `integral_limit`. A NaN or negative `limit`
+    /// counts as zero.
     #[inline]
     pub fn update_within(
         &mut self,
@@ -358,8 +359,10 @@ impl Pid {
             let increment = c.ki * 0.5 * (error + prev_error) * dt_s;
             let candidate = clamp_abs(integral + increment, i_limit);
             let unlimited = p + candidate + d + feed_forward;
+            // Signs compared, not multiplied: a product of two tiny values underflows to 0.
+            let growth = candidate - integral;
             let winding_up =
-                unlimited.abs() > out_limit && (candidate - integral) * unlimited > 0.0;
+                (unlimited > out_limit && growth > 0.0) || (unlimited < -out_limit && growth < 0.0);
             if !winding_up {
                 integral = candidate;
             }

@@ -67,8 +67,9 @@ impl TrackingDifferentiator {
 
     /// Advances by `dt_s` seconds towards `input`; returns `(tracked value, rate per second)`.
     ///
-    /// A non-finite `input`, or a `dt_s` that is not finite and positive, leaves the state
-    /// unchanged (and returns it; `(0, 0)` if there is none).
+    /// A non-finite `input` leaves the state unchanged (and returns it; `(0, 0)` if there is
+    /// none). A `dt_s` that is not finite and positive does not advance a started tracker
+    /// (it returns its state); an unstarted one starts at `input` at rest.
     pub fn update(&mut self, input: f32, dt_s: f32) -> (f32, f32) {
         if !input.is_finite() {
             return self.state.unwrap_or((0.0, 0.0));

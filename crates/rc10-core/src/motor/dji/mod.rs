@@ -10,7 +10,8 @@
 //! | GM6020 current | 1–7 | 0x1FE (1–4) / 0x2FE (5–7) | ±16384 ↔ ±3 A | 0x204 + id |
 //!
 //! Command slots are int16 big-endian. Feedback (1 kHz, DLC 8): D0–1 rotor angle 0–8191,
-//! D2–3 rotor speed rpm (i16), D4–5 torque current (i16, same scale as the command), D6
+//! D2–3 rotor speed rpm (i16), D4–5 torque current (i16, on the current command's scale:
+//! ±16384 ↔ ±20 A / ±10 A / ±3 A; a GM6020 in voltage mode reports it on the ±3 A scale), D6
 //! temperature °C (not on the C610), all big-endian. Speeds and angles are converted once, on
 //! reception, to the output shaft through the exact gear ratio.
 //!
