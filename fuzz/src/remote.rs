@@ -1,0 +1,160 @@
+//! The DBUS and SBUS targets: whole frames to the parser, and byte streams with arrival times
+//! to the receiver, checked against frame decoders written from the protocol and against
+//! the link rule "the last valid frame while it is fresh, else neutral".
+
+use arbitrary::{Arbitrary, Unstructured};
+use core::fmt::Debug;
+use rc10_core::remote::{FrameReceiver, ReceiverFrame, Shared};
+use rc10_core::time::{Duration, Instant};
+
+/// The receivers' link timeout in these targets.
+pub const TIMEOUT_US: u64 = 100_000;
+
+/// Bytes of one frame are at most this far apart (the receiver's frame gap: 1 ms).
+pub const GAP_US: u64 = 1000;
+
+/// What the link should report at a time, from the frames accepted so far.
+#[derive(Debug, Clone, Copy)]
+pub struct LinkOracle<F> {
+    /// Time of the last valid frame (or failsafe report), and the frame (`None`: failsafe).
+    last: Option<(u64, Option<F>)>,
+}
+
+impl<F: Copy + PartialEq + Debug> LinkOracle<F> {
+    /// Nothing received.
+    pub const fn new() -> Self {
+        Self { last: None }
+    }
+
+    /// A valid frame arrived at `now`.
+    pub fn accept(&mut self, frame: F, now: u64) {
+        self.last = Some((now, Some(frame)));
+    }
+
+    /// The receiver reported failsafe at `now`: neutral at once.
+    pub fn failsafe(&mut self, now: u64) {
+        self.last = Some((now, None));
+    }
+
+    /// The value and `lost` flag the link must report at `now`.
+    pub fn expect(&self, now: u64, neutral: F) -> (F, bool) {
+        match self.last {
+            Some((t, Some(f))) if now <= t || now - t <= TIMEOUT_US => (f, false),
+            _ => (neutral, true),
+        }
+    }
+}
+
+impl<F: Copy + PartialEq + Debug> Default for LinkOracle<F> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// How a stream byte's arrival time is spelled in the input: a control byte before each data
+/// byte. Below 0xF0: that many µs after the previous byte (a byte time is ~110 µs at
+/// 100 kbit/s); 0xF0–0xFB: a gap of 1–12 ms; 0xFC: backwards by a u16 of µs; 0xFD: a whole
+/// chunk through `Shared::push_bytes_ending_at` (length, byte time in µs, bytes); 0xFE: any
+/// 64-bit time; 0xFF: read the signal at a time up to 255 ms later without a byte.
+pub fn run_stream<F, const N: usize>(
+    data: &[u8],
+    parse: impl Fn(&[u8]) -> Option<F>,
+    failsafe: impl Fn(&F) -> bool,
+    neutral: F,
+    check_frame: impl Fn(&F),
+) where
+    F: ReceiverFrame + PartialEq + Debug,
+    F::Error: PartialEq + Debug,
+{
+    let mut u = Unstructured::new(data);
+    let mut rx = FrameReceiver::<F, N>::new(Duration::from_micros(TIMEOUT_US));
+    let shared: Shared<FrameReceiver<F, N>> =
+        Shared::new(FrameReceiver::new(Duration::from_micros(TIMEOUT_US)));
+    let mut oracle = LinkOracle::<F>::new();
+    let mut history: Vec<(u64, u8)> = Vec::new();
+    let mut now: u64 = 1_000_000;
+    while !u.is_empty() {
+        let Ok(ctl) = u8::arbitrary(&mut u) else {
+            break;
+        };
+        match ctl {
+            0..=0xEF => now = now.saturating_add(u64::from(ctl)),
+            0xF0..=0xFB => now = now.saturating_add(u64::from(ctl - 0xEF) * 1000),
+            0xFC => now = now.saturating_sub(u64::from(u16::arbitrary(&mut u).unwrap_or(0))),
+            0xFD => {
+                let len = usize::from(u8::arbitrary(&mut u).unwrap_or(0));
+                let byte_us = u64::from(u16::arbitrary(&mut u).unwrap_or(0) % 10_000);
+                let bytes = u.bytes(len.min(u.len())).unwrap_or(&[]);
+                let at = Instant::from_ticks(now);
+                shared.push_bytes_ending_at(bytes, at, Duration::from_micros(byte_us));
+                // Whatever arrived, the signal is neutral or a valid frame.
+                let s = shared.with(|r| r.signal(at));
+                if s.lost {
+                    assert_eq!(s.value, neutral, "lost link not neutral");
+                } else {
+                    check_frame(&s.value);
+                    assert!(!failsafe(&s.value), "failsafe frame reported as live");
+                }
+                continue;
+            }
+            0xFE => now = u64::arbitrary(&mut u).unwrap_or(0),
+            0xFF => {
+                let later =
+                    now.saturating_add(u64::from(u8::arbitrary(&mut u).unwrap_or(0)) * 1000);
+                check_signal(&rx, &oracle, later, neutral);
+                continue;
+            }
+        }
+        let Ok(byte) = u8::arbitrary(&mut u) else {
+            break;
+        };
+        history.push((now, byte));
+        let result = rx.push_byte(byte, Instant::from_ticks(now));
+        if let Some(result) = result {
+            // A completed frame is the last N bytes, none of them after a gap.
+            assert!(history.len() >= N, "a frame from {} bytes", history.len());
+            let tail = &history[history.len() - N..];
+            for w in tail.windows(2) {
+                let (a, b) = (w[0].0, w[1].0);
+                assert!(
+                    b >= a && b - a <= GAP_US,
+                    "a frame across a gap: {a} µs → {b} µs"
+                );
+            }
+            let bytes: Vec<u8> = tail.iter().map(|(_, b)| *b).collect();
+            let expected = parse(&bytes);
+            match (&result, expected) {
+                (Ok(f), Some(e)) => {
+                    assert_eq!(*f, e, "frame {bytes:02X?} decoded wrongly");
+                    check_frame(f);
+                    if failsafe(f) {
+                        oracle.failsafe(now);
+                    } else {
+                        oracle.accept(*f, now);
+                    }
+                }
+                (Err(_), None) => {}
+                (r, e) => panic!("frame {bytes:02X?}: parser says {r:?}, protocol says {e:?}"),
+            }
+            assert_eq!(
+                F::parse(&bytes),
+                result,
+                "stream and whole-frame parse differ"
+            );
+        }
+        check_signal(&rx, &oracle, now, neutral);
+    }
+}
+
+fn check_signal<F, const N: usize>(
+    rx: &FrameReceiver<F, N>,
+    oracle: &LinkOracle<F>,
+    now: u64,
+    neutral: F,
+) where
+    F: ReceiverFrame + PartialEq + Debug,
+{
+    let s = rx.signal(Instant::from_ticks(now));
+    let (value, lost) = oracle.expect(now, neutral);
+    assert_eq!((s.value, s.lost), (value, lost), "signal at {now} µs");
+}
