@@ -232,7 +232,20 @@ fn pack(u: &mut Unstructured<'_>) {
     check(c.v, command.velocity_rad_s, -v, v, 12, "velocity");
     check(c.kp, command.kp, 0.0, 500.0, 12, "kp");
     check(c.kd, command.kd, 0.0, 5.0, 12, "kd");
-    check(c.t, command.torque_nm, -t, t, 12, "torque");
+    // The documented exception: with every other field at the top, a torque code of
+    // 0xFFB..=0xFFE would make a special command and is sent as 0xFFA.
+    let all_top = c.p == 0xFFFF && c.v == 0xFFF && c.kp == 0xFFF && c.kd == 0xFFF;
+    if all_top && c.t == 0xFFA {
+        let want = proto::clamp_f64(command.torque_nm, -t, t);
+        let step = proto::code_step(-t, t, 12);
+        let got = proto::code_to_value(c.t, -t, t, 12);
+        assert!(
+            got <= want + step * 1.001 && got >= want - step * 5.001,
+            "torque near the top"
+        );
+    } else {
+        check(c.t, command.torque_nm, -t, t, 12, "torque");
+    }
     assert!(
         proto::dm_special(&d).is_none() || DM_MIT_SPECIAL_COLLISION,
         "MIT command {command:?} packs to special command bytes {d:02X?}"

@@ -25,14 +25,14 @@ pub mod pending {
     /// (rad → degrees) becomes infinite, and `MitCommand::pack` with a range whose span
     /// `2 · max` overflows packs every field as code 0. While pending, the targets keep MIT
     /// ranges below 1e30 (real motors: tens).
-    pub const DM_HUGE_RANGES: bool = true;
+    pub const DM_HUGE_RANGES: bool = false;
 
     /// `MitCommand::pack` clamps each field into its range, so a command with every field at
     /// or beyond its maximum (position ≥ PMAX, velocity ≥ VMAX, kp ≥ 500, kd ≥ 5) and a
     /// torque just below TMAX packs to `FF FF FF FF FF FF FF FB..FE`: the motor reads that as
     /// a special command (clear error / enable / disable / *save position zero*), not as an
     /// MIT command. While pending, the targets accept that one shape from an MIT command.
-    pub const DM_MIT_SPECIAL_COLLISION: bool = true;
+    pub const DM_MIT_SPECIAL_COLLISION: bool = false;
 
     /// The largest MIT range the targets use while [`DM_HUGE_RANGES`] is pending.
     pub const DM_RANGE_CAP: f32 = if DM_HUGE_RANGES { 1.0e30 } else { f32::MAX };

@@ -89,12 +89,23 @@ impl MitCommand {
     };
 
     /// The eight data bytes, every field clamped to its range first.
+    ///
+    /// Never a special command: with position, velocity, kp and kd all at the top of their
+    /// ranges, a torque code of 0xFFB–0xFFE would make the frame `FF×7 FB..FE`, which the
+    /// motor executes as clear error / enable / disable / save zero. That torque is sent as
+    /// 0xFFA instead (at most 4 codes, 0.02 N·m at the default ±10 N·m, below the request).
     pub fn pack(&self, limits: &MitLimits) -> [u8; 8] {
         let p = float_to_uint(self.position_rad, limits.p_max_rad, 16);
         let v = float_to_uint(self.velocity_rad_s, limits.v_max_rad_s, 12);
         let kp = to_uint(self.kp, 0.0, KP_MAX, 12);
         let kd = to_uint(self.kd, 0.0, KD_MAX, 12);
         let t = float_to_uint(self.torque_nm, limits.t_max_nm, 12);
+        let all_top = p == 0xFFFF && v == 0xFFF && kp == 0xFFF && kd == 0xFFF;
+        let t = if all_top && (0xFFB..=0xFFE).contains(&t) {
+            0xFFA
+        } else {
+            t
+        };
         [
             (p >> 8) as u8,
             p as u8,
@@ -107,6 +118,11 @@ impl MitCommand {
         ]
     }
 }
+
+/// The largest MIT range (`p_max` rad, `v_max` rad/s, `t_max` N·m) [`DmMotor::new`] accepts:
+/// far beyond any Damiao motor (factory: 12.5, 30, 10), small enough that every conversion
+/// the driver makes stays finite.
+pub const MAX_MIT_RANGE: f32 = 1.0e6;
 
 /// Whether a gain is within `[0, max]`.
 const fn ok(x: f32, max: f32) -> bool {
@@ -126,7 +142,15 @@ fn to_uint(x: f32, min: f32, max: f32, bits: u32) -> u32 {
     if span.is_nan() || span <= 0.0 {
         return 0;
     }
-    let scaled = (constrain(x, min, max) - min) * full / span;
+    let x = constrain(x, min, max);
+    // Damiao's order of operations where it stays finite; for ranges near f32::MAX the same
+    // ratio without the overflowing intermediate (halved if even the span overflows).
+    let num = (x - min) * full;
+    let scaled = if num.is_finite() && span.is_finite() {
+        num / span
+    } else {
+        (x * 0.5 - min * 0.5) / (max * 0.5 - min * 0.5) * full
+    };
     constrain(scaled, 0.0, full) as u32
 }
 
@@ -268,8 +292,9 @@ impl DmConfig {
 pub enum DmError {
     /// The CAN ID or master ID is above 0x7FF, or they are equal.
     InvalidId,
-    /// A range or gain is not finite and positive (gains: not within the protocol's range), or
-    /// the position range is below ±π (angle targets need a whole turn of it).
+    /// A range is not finite and positive or above [`MAX_MIT_RANGE`], a gain is not within the
+    /// protocol's range, or the position range is below ±π (angle targets need a whole turn
+    /// of it).
     InvalidLimit,
 }
 
@@ -342,8 +367,10 @@ impl DmMotor {
             return Err(DmError::InvalidId);
         }
         let l = config.limits;
+        // Finite, positive and at most MAX_MIT_RANGE: the driver's unit conversions
+        // (rad → degrees, rad/s → rpm, whole turns of 2·p_max) stay finite.
         const fn positive(x: f32) -> bool {
-            x.is_finite() && x > 0.0
+            x.is_finite() && x > 0.0 && x <= MAX_MIT_RANGE
         }
         // Angle targets need a whole turn of the position field (p_max ≥ π) to always have an
         // equivalent inside the range.
