@@ -76,6 +76,13 @@ impl LowPass {
         self.output
     }
 
+    /// Sets the output to a finite `value` (the caller knows it is finite), as a pass-through
+    /// filter's `update(value, dt)` would.
+    #[inline]
+    pub(crate) fn set_output(&mut self, value: f32) {
+        self.output = Some(value);
+    }
+
     /// Forgets the state: the next sample initialises the output again.
     pub fn reset(&mut self) {
         self.output = None;

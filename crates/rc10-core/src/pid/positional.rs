@@ -160,6 +160,9 @@ pub struct Pid {
     output_cap: f32,
     /// `integral_limit`, at most `f32::MAX` (derived from the configuration).
     integral_cap: f32,
+    /// No deadband, no integral separation, no D filter (derived from the configuration):
+    /// the step takes the short path.
+    plain: bool,
 }
 
 /// Whether all three are finite, in a few instructions: `x · 0` is zero for finite `x` and
@@ -169,11 +172,12 @@ pub(super) fn all_finite(a: f32, b: f32, c: f32) -> bool {
     a * 0.0 + b * 0.0 + c * 0.0 == 0.0
 }
 
-/// Whether `dt_s` is finite and positive, with float comparisons only (NaN fails both; `inf ·
-/// 0` is NaN).
+/// Whether `dt_s` is finite and positive, in one integer comparison: the positive finite
+/// floats (subnormals included) are exactly the bit patterns `1..=0x7F7F_FFFF`; zero, the
+/// negatives (sign bit set), infinity and NaN all fall outside.
 #[inline]
 pub(super) fn dt_valid(dt_s: f32) -> bool {
-    dt_s > 0.0 && dt_s * 0.0 == 0.0
+    dt_s.to_bits().wrapping_sub(1) < 0x7F7F_FFFF
 }
 
 /// The smaller of `a` and `b` by comparison (`f32::min` is a library call on the Cortex-M4).
@@ -199,6 +203,13 @@ const fn cap(limit: f32) -> f32 {
     if limit < f32::MAX { limit } else { f32::MAX }
 }
 
+/// Whether a (valid) configuration has no deadband, no integral separation and no D filter.
+const fn is_plain(config: &PidConfig) -> bool {
+    config.deadband == 0.0
+        && config.integral_separation == f32::INFINITY
+        && LowPass::new(config.d_cutoff_hz).tau_s() == 0.0
+}
+
 impl Pid {
     /// A controller with the given configuration, or why the configuration cannot work.
     pub const fn new(config: PidConfig) -> Result<Self, PidConfigError> {
@@ -212,6 +223,7 @@ impl Pid {
                 last: PidTerms::ZERO,
                 output_cap: cap(config.output_limit),
                 integral_cap: cap(config.integral_limit),
+                plain: is_plain(&config),
             }),
             Err(e) => Err(e),
         }
@@ -236,6 +248,7 @@ impl Pid {
         self.config = config;
         self.output_cap = cap(config.output_limit);
         self.integral_cap = cap(config.integral_limit);
+        self.plain = is_plain(&config);
         self.integral = saturate(self.integral, config.integral_limit);
         Ok(())
     }
@@ -314,6 +327,12 @@ impl Pid {
     /// the limits are at most `f32::MAX`, an integral increment can only be `±inf` (never NaN:
     /// `ki ≠ 0`, `dt > 0` and the two errors are finite) and is clamped, and a sum of finite
     /// terms with at most one infinite partial sum is never NaN.
+    ///
+    /// The configuration is looked at once: without a deadband, integral separation or D
+    /// filter (the usual speed and angle loops, flagged in `plain` when the configuration is
+    /// set) the step is the general one with those parts known to do nothing, so they are
+    /// not computed at all.
+    #[inline(always)]
     fn step_finite(
         &mut self,
         target: f32,
@@ -322,12 +341,152 @@ impl Pid {
         dt_s: f32,
         limit: f32,
     ) -> f32 {
-        let c = &self.config;
+        if self.plain {
+            self.step_plain(target, measurement, feed_forward, dt_s, limit)
+        } else {
+            self.step_general(target, measurement, feed_forward, dt_s, limit)
+        }
+    }
+
+    /// The limit in force (`limit` or the configured one, the lower; NaN and negative count
+    /// as zero) and the integral's limit under it.
+    #[inline(always)]
+    fn limits(&self, feed_forward: f32, limit: f32) -> (f32, f32) {
         // `max(0)` by comparison: NaN and negative limits become 0.
         let extra = if limit > 0.0 { limit } else { 0.0 };
         let out_limit = below(extra, self.output_cap);
         // The integral never needs to exceed what, with the feed-forward, reaches the limit.
         let i_limit = below(out_limit + feed_forward.abs(), self.integral_cap);
+        (out_limit, i_limit)
+    }
+
+    /// The integral after this step, starting from the stored one, given the increment's
+    /// trapezoid `error + prev_error` (conditional integration against `out_limit`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn integrate(
+        &self,
+        error_sum: f32,
+        dt_s: f32,
+        (p, d, feed_forward): (f32, f32, f32),
+        out_limit: f32,
+        i_limit: f32,
+    ) -> f32 {
+        // Held within the limit in force (which may have dropped since the last step); a
+        // new value below replaces it already clamped.
+        let integral = clamp_abs(self.integral, i_limit);
+        let increment = self.config.ki * 0.5 * error_sum * dt_s;
+        let candidate = clamp_abs(integral + increment, i_limit);
+        let unlimited = p + candidate + d + feed_forward;
+        // Signs compared, not multiplied: a product of two tiny values underflows to 0.
+        let growth = candidate - integral;
+        let winding_up =
+            (unlimited > out_limit && growth > 0.0) || (unlimited < -out_limit && growth < 0.0);
+        if winding_up { integral } else { candidate }
+    }
+
+    /// [`step_finite`](Self::step_finite) for a configuration without deadband, integral
+    /// separation or D filter: the error is always in band, `|e| ≤ 0` only for `±0` (which
+    /// the deadband turns into `+0`, as `e + 0.0` does), and D passes unfiltered.
+    #[inline(always)]
+    fn step_plain(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+    ) -> f32 {
+        let (out_limit, i_limit) = self.limits(feed_forward, limit);
+        let c = &self.config;
+        let error = finite(c.error_mode.diff(target, measurement)) + 0.0;
+        let dt_ok = dt_valid(dt_s);
+        let p = finite(c.kp * error);
+        let d = if c.kd == 0.0 {
+            0.0
+        } else {
+            self.plain_derivative(measurement, dt_s, dt_ok)
+        };
+        let integral = if dt_ok && self.config.ki != 0.0 {
+            let prev_error = match self.prev_error {
+                Some(e) => e,
+                None => error,
+            };
+            self.integrate(
+                error + prev_error,
+                dt_s,
+                (p, d, feed_forward),
+                out_limit,
+                i_limit,
+            )
+        } else {
+            clamp_abs(self.integral, i_limit)
+        };
+        self.finish(
+            p,
+            integral,
+            d,
+            feed_forward,
+            out_limit,
+            Some(error),
+            measurement,
+        )
+    }
+
+    /// The unfiltered D term (`kd ≠ 0`, no D filter): what [`derivative`](Self::derivative)
+    /// gives with a pass-through filter, whose output is the last raw value.
+    #[inline(always)]
+    fn plain_derivative(&mut self, measurement: f32, dt_s: f32, dt_ok: bool) -> f32 {
+        match self.prev_measurement {
+            Some(prev) if dt_ok => {
+                let change = self.config.error_mode.diff(measurement, prev);
+                let raw_d = finite(-self.config.kd * change / dt_s);
+                self.d_filter.set_output(raw_d);
+                raw_d
+            }
+            Some(_) => self.d_filter.output().unwrap_or(0.0),
+            None => 0.0,
+        }
+    }
+
+    /// Stores the step's state and terms and returns them.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn finish(
+        &mut self,
+        p: f32,
+        integral: f32,
+        d: f32,
+        feed_forward: f32,
+        out_limit: f32,
+        prev_error: Option<f32>,
+        measurement: f32,
+    ) -> f32 {
+        let output = clamp_abs(p + integral + d + feed_forward, out_limit);
+        self.integral = integral;
+        self.prev_error = prev_error;
+        self.prev_measurement = Some(measurement);
+        // Field by field: a whole-struct store is built on the stack and copied.
+        self.last.p = p;
+        self.last.i = integral;
+        self.last.d = d;
+        self.last.ff = feed_forward;
+        self.last.output = output;
+        output
+    }
+
+    /// [`step_finite`](Self::step_finite) for any configuration.
+    #[inline(never)]
+    fn step_general(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+    ) -> f32 {
+        let (out_limit, i_limit) = self.limits(feed_forward, limit);
+        let c = &self.config;
         let raw_error = finite(c.error_mode.diff(target, measurement));
         let error = if raw_error.abs() <= c.deadband {
             0.0
@@ -346,39 +505,33 @@ impl Pid {
 
         let c = &self.config;
         let in_band = raw_error.abs() <= c.integral_separation;
-        // Held within the limit in force (which may have dropped since the last step); a
-        // new value below replaces it already clamped.
-        let mut integral = clamp_abs(self.integral, i_limit);
-        if dt_ok && c.ki != 0.0 && in_band {
+        let integral = if dt_ok && c.ki != 0.0 && in_band {
             // Trapezoid over in-band errors only: right after the error re-enters the band the
             // previous (separated) error is not folded in.
             let prev_error = match self.prev_error {
                 Some(e) => e,
                 None => error,
             };
-            let increment = c.ki * 0.5 * (error + prev_error) * dt_s;
-            let candidate = clamp_abs(integral + increment, i_limit);
-            let unlimited = p + candidate + d + feed_forward;
-            // Signs compared, not multiplied: a product of two tiny values underflows to 0.
-            let growth = candidate - integral;
-            let winding_up =
-                (unlimited > out_limit && growth > 0.0) || (unlimited < -out_limit && growth < 0.0);
-            if !winding_up {
-                integral = candidate;
-            }
-        }
-        let output = clamp_abs(p + integral + d + feed_forward, out_limit);
-        self.integral = integral;
-        self.prev_error = if in_band { Some(error) } else { None };
-        self.prev_measurement = Some(measurement);
-        self.last = PidTerms {
-            p,
-            i: integral,
-            d,
-            ff: feed_forward,
-            output,
+            self.integrate(
+                error + prev_error,
+                dt_s,
+                (p, d, feed_forward),
+                out_limit,
+                i_limit,
+            )
+        } else {
+            clamp_abs(self.integral, i_limit)
         };
-        output
+        let prev_error = if in_band { Some(error) } else { None };
+        self.finish(
+            p,
+            integral,
+            d,
+            feed_forward,
+            out_limit,
+            prev_error,
+            measurement,
+        )
     }
 
     /// The D term (`kd ≠ 0`): `-kd · d(measurement)/dt`, through the optional low-pass.
@@ -684,6 +837,38 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn plain_step_is_the_general_step_bit_for_bit(
+            kp in -1e3f32..1e3, ki in -1e3f32..1e3, kd in prop_oneof![Just(0.0f32), -1.0f32..1.0],
+            out_limit in prop_oneof![Just(f32::INFINITY), 0.0f32..1e3],
+            i_limit in prop_oneof![Just(f32::INFINITY), 0.0f32..1e3],
+            circular in proptest::bool::ANY,
+            steps in proptest::collection::vec(
+                (proptest::num::f32::ANY, -1e4f32..1e4, -1e2f32..1e2,
+                 prop_oneof![Just(0.001f32), proptest::num::f32::ANY],
+                 prop_oneof![Just(f32::INFINITY), proptest::num::f32::ANY]),
+                1..48),
+        ) {
+            let mode = if circular { ErrorMode::DEGREES } else { ErrorMode::Linear };
+            let config = PidConfig::new(kp, ki, kd)
+                .with_output_limit(out_limit)
+                .with_integral_limit(i_limit)
+                .with_error_mode(mode);
+            let mut plain = pid(config);
+            prop_assert!(plain.plain);
+            let mut general = plain;
+            general.plain = false;
+            for (target, meas, ff, dt, limit) in steps {
+                let a = plain.update_within(target, meas, ff, dt, limit);
+                let b = general.update_within(target, meas, ff, dt, limit);
+                let bits = |t: PidTerms| [t.p, t.i, t.d, t.ff, t.output].map(f32::to_bits);
+                prop_assert_eq!(bits(a), bits(b));
+                general.plain = true;
+                prop_assert_eq!(plain, general);
+                general.plain = false;
+            }
+        }
+
         #[test]
         fn output_always_finite_and_within_limits(
             kp in -1e4f32..1e4, ki in -1e4f32..1e4, kd in -1e2f32..1e2,
