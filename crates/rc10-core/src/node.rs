@@ -176,7 +176,10 @@ impl Default for IdSet {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BusUsage {
-    /// The IDs this node's feedback arrives on (empty: it receives nothing).
+    /// The IDs this node's feedback arrives on (empty: it receives nothing). This is the
+    /// whole of what the node can receive: [`Bus::dispatch`](crate::bus::Bus::dispatch)
+    /// offers a node only frames on these IDs (and the hardware acceptance filters are built
+    /// from them), so [`CanNode::matches_frame`] can narrow it but never widen it.
     pub listen: IdSet,
     /// Feedback frames per second the device sends on all of `listen` together (1000 for a
     /// DJI ESC), for the frame budget.
@@ -412,6 +415,12 @@ pub trait CanNode: Sync {
 
     /// Whether a received frame is this node's feedback. The default uses
     /// [`BusUsage::listen`].
+    ///
+    /// The bus asks only about frames on IDs in the node's declared
+    /// [`BusUsage::listen`] set: an override can refuse some of those (narrow the set, e.g. by
+    /// DLC or remote flag), but claiming an ID outside it has no effect, since such a frame
+    /// is never offered to the node (nor let in by the acceptance filters built from the
+    /// declarations).
     fn matches_frame(&self, frame: &CanFrame) -> bool {
         self.bus_usage().listen.matches(frame.id())
     }

@@ -24,10 +24,14 @@
 //!
 //! # Receiving
 //!
-//! Each received frame goes to the first node whose `matches_frame` claims it (registration
-//! guarantees at most one can), which parses it in `update_feedback`. A frame nobody claims is
-//! counted as unmatched; a claimed frame the node rejects (wrong DLC, out-of-range field) is
-//! counted as rejected and changes nothing.
+//! Each received frame goes to the node that declared its ID in
+//! [`BusUsage::listen`](crate::node::BusUsage::listen) (registration guarantees at most one
+//! did), if that node's `matches_frame` claims it; the node parses it in `update_feedback`.
+//! `matches_frame` can only narrow a node's declared listen set, never widen it: a frame on
+//! an undeclared ID is never offered to anyone (the hardware acceptance filters, built from
+//! the same declarations, would not let it in either). A frame nobody claims is counted as
+//! unmatched; a claimed frame the node rejects (wrong DLC, out-of-range field) is counted as
+//! rejected and changes nothing.
 //!
 //! # Sync core, async shell
 //!
@@ -257,12 +261,20 @@ pub struct BusBuilder<'a, const N: usize> {
     config: BusConfig,
 }
 
-/// What a node declared it sends as whole frames, kept to hold it to that every tick.
+/// What a node declared: the whole frames it sends, kept to hold it to that every tick, and
+/// the IDs it listens on, which bound what [`Bus::dispatch`] hands it.
 #[derive(Debug, Clone, Copy)]
 struct Declared {
     frames_per_tick: u8,
     sends: IdSet,
+    listen: IdSet,
 }
+
+/// The first standard ID of [`Bus`]'s direct routing table: DJI feedback arrives on
+/// 0x201–0x20B, so `0x200 + k` for `k < ROUTE_LEN` covers every DJI motor.
+const ROUTE_BASE: u16 = 0x200;
+/// Entries of the direct routing table.
+const ROUTE_LEN: usize = 16;
 
 impl<'a, const N: usize> BusBuilder<'a, N> {
     /// An empty builder with [`BusConfig::DEFAULT`].
@@ -355,6 +367,7 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
         let declared = Declared {
             frames_per_tick: mine.frames_per_tick,
             sends: mine.sends,
+            listen: mine.listen,
         };
         // Same capacity as `nodes`, which just took the node.
         let _ = self.declared.push(declared);
@@ -372,9 +385,21 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
 
     /// Freezes the registry. Nothing can be registered after this.
     pub fn build(self) -> Bus<'a, N> {
+        // Standard IDs 0x200 + k: which node (index + 1; 0 for none) declared each. The
+        // listen sets are disjoint (registration checked), so at most one node declares any.
+        let mut route = [0u8; ROUTE_LEN];
+        for (k, slot) in (0u16..).zip(route.iter_mut()) {
+            let id = crate::can::StandardId::new(ROUTE_BASE.saturating_add(k))
+                .map(crate::can::Id::Standard);
+            let owner = id.and_then(|id| self.declared.iter().position(|d| d.listen.matches(id)));
+            *slot = owner
+                .and_then(|i| u8::try_from(i).ok())
+                .map_or(0, |i| i.saturating_add(1));
+        }
         Bus {
             nodes: self.nodes,
             declared: self.declared,
+            route,
             config: self.config,
             stats: BusStats::new(),
             window: Mutex::new(RefCell::new(RateWindow::new())),
@@ -457,6 +482,9 @@ pub struct TransmitReport {
 pub struct Bus<'a, const N: usize> {
     nodes: heapless::Vec<&'a dyn CanNode, N>,
     declared: heapless::Vec<Declared, N>,
+    /// Direct routing of standard IDs `ROUTE_BASE + k`: the index + 1 of the node that
+    /// declared the ID in its listen set, 0 for none (built once, from the declarations).
+    route: [u8; ROUTE_LEN],
     config: BusConfig,
     stats: BusStats,
     window: Mutex<CriticalSectionRawMutex, RefCell<RateWindow>>,
@@ -583,21 +611,46 @@ impl<'a, const N: usize> Bus<'a, N> {
     }
 
     /// Routes a received frame to the node that claims it.
+    ///
+    /// A node is offered only frames on IDs it declared in its
+    /// [`BusUsage::listen`](crate::node::BusUsage::listen) set (registration guarantees at
+    /// most one node declares any ID); its [`CanNode::matches_frame`] then decides whether it
+    /// takes the frame, so it can narrow its declared set (e.g. refuse remote frames) but never
+    /// widen it: a frame on an ID no node declared is unmatched, whatever `matches_frame`
+    /// would say. This is what the hardware acceptance filters, built from the same
+    /// declarations ([`crate::can::acceptance`]), let through anyway. The declaring node is
+    /// found by a table indexed by the ID for standard IDs 0x200–0x20F (every DJI feedback
+    /// ID), by a scan of the declared sets otherwise: the cost does not grow with traffic.
     pub fn dispatch(&self, frame: &CanFrame, now: Instant) -> Dispatch {
         self.stats.record_rx(timing::unstuffed_bits(frame));
-        for (i, node) in self.nodes.iter().enumerate() {
-            if node.matches_frame(frame) {
-                return match node.update_feedback(frame, now) {
-                    Ok(()) => Dispatch::Handled(i),
-                    Err(e) => {
-                        self.stats.record_rejected();
-                        Dispatch::Rejected(i, e)
-                    }
-                };
-            }
+        if let Some(i) = self.declared_listener(frame)
+            && let Some(node) = self.nodes.get(i)
+            && node.matches_frame(frame)
+        {
+            return match node.update_feedback(frame, now) {
+                Ok(()) => Dispatch::Handled(i),
+                Err(e) => {
+                    self.stats.record_rejected();
+                    Dispatch::Rejected(i, e)
+                }
+            };
         }
         self.stats.record_unmatched();
         Dispatch::Unmatched
+    }
+
+    /// The index of the node whose declared listen set holds the frame's ID, if any.
+    #[inline]
+    fn declared_listener(&self, frame: &CanFrame) -> Option<usize> {
+        let id = frame.id();
+        if let crate::can::Id::Standard(standard) = id
+            && let Some(&entry) = self
+                .route
+                .get(usize::from(standard.as_raw().wrapping_sub(ROUTE_BASE)))
+        {
+            return usize::from(entry).checked_sub(1);
+        }
+        self.declared.iter().position(|d| d.listen.matches(id))
     }
 
     /// Counts a receive-side error reported by the transport. A bus-off report from the

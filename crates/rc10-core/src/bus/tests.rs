@@ -293,6 +293,89 @@ fn dispatch_routes_each_frame_to_its_motor_among_eight() {
     assert_eq!((c.rx_frames, c.rx_unmatched, c.rx_rejected), (10, 1, 1));
 }
 
+/// A node whose `matches_frame` claims every frame, declaring `listen` only.
+struct Greedy {
+    listen: IdSet,
+    frames: &'static StdMutex<Vec<u32>>,
+}
+
+impl CanNode for Greedy {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage {
+            listen: self.listen,
+            ..BusUsage::NONE
+        }
+    }
+    fn matches_frame(&self, _frame: &CanFrame) -> bool {
+        true
+    }
+    fn update_feedback(&self, frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        self.frames.lock().unwrap().push(frame.raw_id());
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, _out: &mut TxBatch) {}
+}
+
+#[test]
+fn matches_frame_cannot_claim_an_id_outside_the_declared_listen_set() {
+    // Both routes: a DJI-range ID (direct table) and IDs outside it (declared-set scan).
+    let frames: &'static StdMutex<Vec<u32>> = Box::leak(Box::new(StdMutex::new(Vec::new())));
+    let greedy = Greedy {
+        listen: IdSet::one(IdFilter::standard(0x203))
+            .with(IdFilter::standard(0x321))
+            .with(IdFilter::extended_masked(0x07, 0xFF)),
+        frames,
+    };
+    let motor = DjiMotor::m3508(1).unwrap();
+    let mut builder = BusBuilder::<4>::with_config(NO_BUDGET);
+    builder.register(&greedy).unwrap();
+    builder.register(&motor).unwrap();
+    let bus = builder.build();
+    for undeclared in [fb(0x202), fb(0x20F), fb(0x322), fb(0x7FF)] {
+        assert_eq!(bus.dispatch(&undeclared, T0), Dispatch::Unmatched);
+    }
+    let ext_undeclared = CanFrame::extended(0x0908, &[0; 8]).unwrap();
+    assert_eq!(bus.dispatch(&ext_undeclared, T0), Dispatch::Unmatched);
+    // Another node's declared ID goes to that node, not to the greedy one registered first.
+    assert_eq!(bus.dispatch(&fb(0x201), T0), Dispatch::Handled(1));
+    // Its own declared IDs, on every route, it does get.
+    let ext_declared = CanFrame::extended(0x0907, &[0; 8]).unwrap();
+    for declared in [fb(0x203), fb(0x321), ext_declared] {
+        assert_eq!(bus.dispatch(&declared, T0), Dispatch::Handled(0));
+    }
+    assert_eq!(*frames.lock().unwrap(), [0x203, 0x321, 0x0907]);
+    assert_eq!(bus.stats().snapshot().rx_unmatched, 5);
+}
+
+/// A node that declares a DJI feedback ID but refuses remote frames on it.
+struct NoRemote;
+
+impl CanNode for NoRemote {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage::NONE.listening(IdFilter::standard(0x205), 1000)
+    }
+    fn matches_frame(&self, frame: &CanFrame) -> bool {
+        !frame.is_remote() && self.bus_usage().listen.matches(frame.id())
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, _out: &mut TxBatch) {}
+}
+
+#[test]
+fn matches_frame_narrows_the_declared_listen_set() {
+    static NODE: NoRemote = NoRemote;
+    let mut builder = BusBuilder::<1>::new();
+    builder.register(&NODE).unwrap();
+    let bus = builder.build();
+    let remote = CanFrame::remote(crate::can::StandardId::new(0x205).unwrap(), 8).unwrap();
+    assert_eq!(bus.dispatch(&remote, T0), Dispatch::Unmatched);
+    assert_eq!(bus.dispatch(&fb(0x205), T0), Dispatch::Handled(0));
+}
+
 #[test]
 fn extended_frame_with_a_dji_id_is_not_claimed() {
     let m = DjiMotor::m3508(1).unwrap();
