@@ -284,6 +284,11 @@ pub struct TxBatch {
     /// Bit `i` set: frame `i` is a shared slot frame (only these take slot writes).
     slot_frames: u16,
     overflowed: u32,
+    /// The slot frame written last, as (command ID, index in `frames`): the motors of one
+    /// command frame are usually packed one after another, so the next slot write finds its
+    /// frame here without a search. Only ever a slot frame's true position (reset whenever
+    /// frames move).
+    last_slot: Option<(u16, usize)>,
 }
 
 impl TxBatch {
@@ -293,7 +298,17 @@ impl TxBatch {
             frames: heapless::Vec::new(),
             slot_frames: 0,
             overflowed: 0,
+            last_slot: None,
         }
+    }
+
+    /// The index of the slot frame for command ID `id`, if one is in the batch.
+    fn slot_frame_index(&self, id: u16) -> Option<usize> {
+        let slot_frames = self.slot_frames;
+        self.frames
+            .iter()
+            .enumerate()
+            .position(|(i, f)| slot_frames & (1 << i) != 0 && f.raw_id() == u32::from(id))
     }
 
     /// Writes `value` big-endian into `slot`, creating the zero-filled command frame if this is
@@ -304,30 +319,30 @@ impl TxBatch {
     /// same ID is never written into (registration rejects that clash; should it happen
     /// anyway, the two frames stay separate).
     pub fn write_slot(&mut self, slot: CommandSlot, value: i16) -> bool {
-        let slot_frames = self.slot_frames;
-        let existing = self
-            .frames
-            .iter_mut()
-            .enumerate()
-            .find(|(i, f)| slot_frames & (1 << i) != 0 && f.raw_id() == u32::from(slot.id))
-            .map(|(_, f)| f);
-        let frame = match existing {
-            Some(f) => f,
-            None => {
-                let Some(fresh) = CanFrame::standard(slot.id, &[0; 8]) else {
-                    return false; // unreachable: CommandSlot::new checked the ID
+        let index = match self.last_slot {
+            Some((id, index)) if id == slot.id => index,
+            _ => {
+                let index = match self.slot_frame_index(slot.id) {
+                    Some(i) => i,
+                    None => {
+                        let Some(fresh) = CanFrame::standard(slot.id, &[0; 8]) else {
+                            return false; // unreachable: CommandSlot::new checked the ID
+                        };
+                        let index = self.frames.len();
+                        if self.frames.push(fresh).is_err() {
+                            self.count_overflow();
+                            return false;
+                        }
+                        self.slot_frames |= 1 << index;
+                        index
+                    }
                 };
-                let index = self.frames.len();
-                if self.frames.push(fresh).is_err() {
-                    self.count_overflow();
-                    return false;
-                }
-                self.slot_frames |= 1 << index;
-                match self.frames.last_mut() {
-                    Some(f) => f,
-                    None => return false,
-                }
+                self.last_slot = Some((slot.id, index));
+                index
             }
+        };
+        let Some(frame) = self.frames.get_mut(index) else {
+            return false; // unreachable: the index is a frame's
         };
         // Slot `index` is bytes 2·index and 2·index + 1.
         let (pairs, _) = frame.buffer_mut().as_chunks_mut::<2>();
@@ -370,6 +385,8 @@ impl TxBatch {
             whole = whole.saturating_add(1);
             if whole > frames_per_tick || !sends.matches(frame.id()) {
                 self.frames.remove(i);
+                // Frames after `i` moved down: the remembered slot frame may have moved.
+                self.last_slot = None;
                 // Slot-frame flags above `i` move down with their frames.
                 let below = self.slot_frames & ((1u16 << i) - 1);
                 let above = (self.slot_frames >> (i + 1)) << i;
@@ -397,6 +414,7 @@ impl TxBatch {
         self.frames.clear();
         self.slot_frames = 0;
         self.overflowed = 0;
+        self.last_slot = None;
     }
 }
 
@@ -488,6 +506,23 @@ mod tests {
         b.write_slot(CommandSlot::new(0x1FF, 1).unwrap(), 3);
         assert_eq!(b.frames().len(), 3);
         assert_eq!(b.frames()[2].data(), &[0, 2, 0, 3, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn slot_write_finds_its_frame_after_an_undeclared_frame_before_it_is_dropped() {
+        let mut b = TxBatch::new();
+        b.push(CanFrame::standard(0x305, &[9]).unwrap()).unwrap(); // undeclared
+        b.write_slot(CommandSlot::new(0x200, 0).unwrap(), 0x0102);
+        assert_eq!(b.keep_declared(0, 0, &IdSet::EMPTY), 1);
+        // The slot frame moved from index 1 to 0: the next write must land in it.
+        b.write_slot(CommandSlot::new(0x200, 1).unwrap(), 0x0304);
+        assert_eq!(b.frames().len(), 1);
+        assert_eq!(b.frames()[0].data(), &[1, 2, 3, 4, 0, 0, 0, 0]);
+        // A cleared batch starts a fresh frame.
+        b.clear();
+        b.write_slot(CommandSlot::new(0x200, 2).unwrap(), 0x0506);
+        assert_eq!(b.frames().len(), 1);
+        assert_eq!(b.frames()[0].data(), &[0, 0, 0, 0, 5, 6, 0, 0]);
     }
 
     #[test]

@@ -284,12 +284,61 @@ struct DjiState {
     derate: f32,
     /// A user limit on the command (amps, or volts in voltage mode); infinity for none.
     user_limit: f32,
+    /// The limit in force: the ESC's range, derated, and the user's limit if lower.
+    /// Recomputed when `derate` or `user_limit` changes, not on every tick.
+    limit: f32,
     /// Live-tuning and homing requests, applied by the next tick.
     pending_speed: Option<PidConfig>,
     pending_angle: Option<PidConfig>,
     pending_home_deg: Option<f32>,
+    /// Whether any of the three requests above is set: the tick looks at this one flag.
+    pending: bool,
     /// The time of the last tick: feedback stamped well after it is not trusted for timing.
     last_tick: Option<Instant>,
+}
+
+/// The limit in force: the ESC's `range`, derated, and the user's limit if lower.
+const fn limit_in_force(range: f32, derate: f32, user_limit: f32) -> f32 {
+    let derated = range * derate;
+    if user_limit < derated {
+        user_limit
+    } else {
+        derated
+    }
+}
+
+impl DjiState {
+    /// Records a request for the next tick (`set` stores it).
+    fn request(&mut self, set: impl FnOnce(&mut Self)) {
+        set(self);
+        self.pending = true;
+    }
+
+    /// Applies live-tuning requests recorded since the last tick (validated when recorded).
+    #[cold]
+    #[inline(never)]
+    fn apply_pending_configs(&mut self) {
+        if let Some(speed) = self.pending_speed.take() {
+            let _ = self.cascade.set_speed_config(speed);
+        }
+        if let Some(angle) = self.pending_angle.take() {
+            let _ = self.cascade.set_angle_config(angle);
+        }
+        self.pending = self.pending_home_deg.is_some();
+    }
+
+    /// Applies a homing request, once the encoder has a reading (else it waits for the next
+    /// tick).
+    #[cold]
+    #[inline(never)]
+    fn apply_pending_home(&mut self) {
+        if let Some(deg) = self.pending_home_deg.take()
+            && !self.encoder.set_total_angle_deg(deg)
+        {
+            self.pending_home_deg = Some(deg); // no reading yet: try again next tick
+        }
+        self.pending = self.pending_home_deg.is_some();
+    }
 }
 
 /// A DJI motor on a CAN bus: [`CanNode`] for the scheduler, [`Motor`] for the application.
@@ -381,9 +430,11 @@ impl DjiMotor {
                 awaiting_return: false,
                 derate: 1.0,
                 user_limit: f32::INFINITY,
+                limit: limit_in_force(raw_limit / raw_per_unit, 1.0, f32::INFINITY),
                 pending_speed: None,
                 pending_angle: None,
                 pending_home_deg: None,
+                pending: false,
                 last_tick: None,
             })),
         })
@@ -450,7 +501,7 @@ impl DjiMotor {
     pub fn set_speed_pid(&self, config: PidConfig) -> Result<(), PidConfigError> {
         config.validate()?;
         self.state
-            .lock(|s| s.borrow_mut().pending_speed = Some(config));
+            .lock(|s| s.borrow_mut().request(|s| s.pending_speed = Some(config)));
         Ok(())
     }
 
@@ -458,7 +509,7 @@ impl DjiMotor {
     pub fn set_angle_pid(&self, config: PidConfig) -> Result<(), PidConfigError> {
         config.validate()?;
         self.state
-            .lock(|s| s.borrow_mut().pending_angle = Some(config));
+            .lock(|s| s.borrow_mut().request(|s| s.pending_angle = Some(config)));
         Ok(())
     }
 
@@ -504,7 +555,11 @@ impl DjiMotor {
         if limit < 0.0 {
             return Err(TargetError::OutOfRange);
         }
-        self.state.lock(|s| s.borrow_mut().user_limit = limit);
+        self.state.lock(|s| {
+            let mut s = s.borrow_mut();
+            s.user_limit = limit;
+            s.limit = limit_in_force(self.limit, s.derate, limit);
+        });
         Ok(())
     }
 
@@ -615,6 +670,7 @@ impl DjiMotor {
                     Some(limits) => limits.derating(celsius),
                     None => 1.0,
                 };
+                s.limit = limit_in_force(self.limit, s.derate, s.user_limit);
             }
         }
         s.liveness.record_feedback(now);
@@ -648,15 +704,8 @@ impl CanNode for DjiMotor {
             s.last_tick = Some(now);
             // Requests recorded by the setters since the last tick (validated there).
             // `is_some` first: taking a large `Option` copies it even when it is `None`.
-            if s.pending_speed.is_some()
-                && let Some(speed) = s.pending_speed.take()
-            {
-                let _ = s.cascade.set_speed_config(speed);
-            }
-            if s.pending_angle.is_some()
-                && let Some(angle) = s.pending_angle.take()
-            {
-                let _ = s.cascade.set_angle_config(angle);
+            if s.pending {
+                s.apply_pending_configs();
             }
             if s.liveness.check(health, now) {
                 s.awaiting_return = true;
@@ -666,18 +715,10 @@ impl CanNode for DjiMotor {
                 self.store_command(0.0);
                 return;
             }
-            if let Some(deg) = s.pending_home_deg.take()
-                && !s.encoder.set_total_angle_deg(deg)
-            {
-                s.pending_home_deg = Some(deg); // no reading yet: try again next tick
+            if s.pending {
+                s.apply_pending_home();
             }
-            // The limit in force: the ESC's range, derated, and the user's limit if lower.
-            let range = self.limit * s.derate;
-            let limit = if s.user_limit < range {
-                s.user_limit
-            } else {
-                range
-            };
+            let limit = s.limit;
             // Angles cost a 64-bit division; only the ticks that run the angle loop read them.
             let angles = s.cascade.angle_loop_due();
             let (angle_deg, total_angle_deg) = if angles {
@@ -763,8 +804,10 @@ impl Motor for DjiMotor {
         if !angle_deg.is_finite() {
             return Err(TargetError::NotFinite);
         }
-        self.state
-            .lock(|s| s.borrow_mut().pending_home_deg = Some(angle_deg));
+        self.state.lock(|s| {
+            s.borrow_mut()
+                .request(|s| s.pending_home_deg = Some(angle_deg))
+        });
         Ok(())
     }
 
