@@ -297,11 +297,24 @@ impl Encoder {
             .total_counts
             .checked_mul(i64::from(self.config.gear.output_turns))
         {
-            Some(scaled) => (
-                scaled.div_euclid(per_turn),
-                scaled.rem_euclid(per_turn),
-                per_turn,
-            ),
+            Some(scaled) => {
+                // Within ±2^31 (an M3508 within 73 output turns of its origin, a GM6020
+                // within 262 000) the 32-bit division is one instruction; the 64-bit one is a
+                // library call of some sixty. Both are exact.
+                if let (Ok(scaled), Ok(per)) = (i32::try_from(scaled), i32::try_from(per_turn))
+                    && let (Some(turns), Some(rem)) = (
+                        scaled.checked_div_euclid(per),
+                        scaled.checked_rem_euclid(per),
+                    )
+                {
+                    return (i64::from(turns), i64::from(rem), per_turn);
+                }
+                (
+                    scaled.div_euclid(per_turn),
+                    scaled.rem_euclid(per_turn),
+                    per_turn,
+                )
+            }
             None => {
                 #[allow(
                     clippy::arithmetic_side_effects,
@@ -529,6 +542,33 @@ mod tests {
 
     fn dji(gear: GearRatio) -> Encoder {
         Encoder::new(EncoderConfig::dji(gear)).unwrap()
+    }
+
+    #[test]
+    fn output_position_is_exact_on_both_sides_of_the_32_bit_fast_path() {
+        // M3508: scaled = counts · 187 leaves i32 near ±11.48 M counts (73 output turns).
+        let mut enc = dji(GearRatio::M3508);
+        let per = 8192i128 * 3591;
+        let edge = i64::from(i32::MAX) / 187;
+        for base in [
+            0,
+            edge,
+            -edge,
+            4 * edge,
+            -4 * edge,
+            i64::MAX / 187,
+            i64::MIN / 187,
+        ] {
+            for delta in -3..=3 {
+                let counts = base + delta;
+                enc.total_counts = counts;
+                let scaled = i128::from(counts) * 187;
+                let (turns, rem, per_turn) = enc.output_position();
+                assert_eq!(i128::from(turns), scaled.div_euclid(per), "{counts}");
+                assert_eq!(i128::from(rem), scaled.rem_euclid(per), "{counts}");
+                assert_eq!(i128::from(per_turn), per);
+            }
+        }
     }
 
     /// Simulates a rotor at constant `rotor_rpm` read every 1 ms, with `lost` frames dropped
