@@ -293,28 +293,32 @@ impl Encoder {
     /// overflow, which takes thousands of years of continuous rotation.
     fn output_position(&self) -> (i64, i64, i64) {
         let per_turn = units_per_turn(&self.config);
+        // Within ±2^31 counts the scaled position cannot overflow i64 (|i32 × u32| < 2^63),
+        // so it needs no overflow check; within ±2^31 of scaled position (an M3508 within 73
+        // output turns of its origin, a GM6020 within 262 000) the 32-bit division is one
+        // instruction, where the 64-bit one is a library call of some sixty. All paths are
+        // exact.
+        if let Ok(counts) = i32::try_from(self.total_counts)
+            && let Ok(scaled) = i32::try_from(
+                i64::from(counts).wrapping_mul(i64::from(self.config.gear.output_turns)),
+            )
+            && let Ok(per) = i32::try_from(per_turn)
+            && let (Some(turns), Some(rem)) = (
+                scaled.checked_div_euclid(per),
+                scaled.checked_rem_euclid(per),
+            )
+        {
+            return (i64::from(turns), i64::from(rem), per_turn);
+        }
         match self
             .total_counts
             .checked_mul(i64::from(self.config.gear.output_turns))
         {
-            Some(scaled) => {
-                // Within ±2^31 (an M3508 within 73 output turns of its origin, a GM6020
-                // within 262 000) the 32-bit division is one instruction; the 64-bit one is a
-                // library call of some sixty. Both are exact.
-                if let (Ok(scaled), Ok(per)) = (i32::try_from(scaled), i32::try_from(per_turn))
-                    && let (Some(turns), Some(rem)) = (
-                        scaled.checked_div_euclid(per),
-                        scaled.checked_rem_euclid(per),
-                    )
-                {
-                    return (i64::from(turns), i64::from(rem), per_turn);
-                }
-                (
-                    scaled.div_euclid(per_turn),
-                    scaled.rem_euclid(per_turn),
-                    per_turn,
-                )
-            }
+            Some(scaled) => (
+                scaled.div_euclid(per_turn),
+                scaled.rem_euclid(per_turn),
+                per_turn,
+            ),
             None => {
                 #[allow(
                     clippy::arithmetic_side_effects,
