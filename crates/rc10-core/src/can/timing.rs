@@ -61,34 +61,38 @@ pub fn worst_case_bits(extended: bool, data_len: usize) -> u32 {
 /// ```
 #[allow(
     clippy::arithmetic_side_effects,
-    reason = "at most 118 stuffable bits, 29 stuff bits and 13 tail bits"
+    reason = "at most 118 stuffable bits: every shift is below 128, every sum below 160"
 )]
 pub fn frame_bits(frame: &CanFrame) -> u32 {
-    // The whole stuffed region (at most 103 bits + 15 CRC bits) as one MSB-first bit string.
-    let mut bits = BitString::default();
-    bits.push(0, 1); // SOF
-    match frame.id() {
-        Id::Standard(id) => {
-            bits.push(u32::from(id.as_raw()), 11);
-            bits.push(u32::from(frame.is_remote()), 1); // RTR
-            bits.push(0, 2); // IDE, r0
-        }
+    // SOF to DLC, right-aligned in a word (the SOF bit is the top one and is 0).
+    let rtr = u64::from(frame.is_remote());
+    let dlc = frame.dlc() as u64;
+    let (header, header_len) = match frame.id() {
+        // SOF, ID 11, RTR, IDE = 0, r0, DLC 4.
+        Id::Standard(id) => ((u64::from(id.as_raw()) << 7) | (rtr << 6) | dlc, 19),
         Id::Extended(id) => {
-            let raw = id.as_raw();
-            bits.push(raw >> 18, 11);
-            bits.push(0b11, 2); // SRR, IDE
-            bits.push(raw & 0x3_FFFF, 18);
-            bits.push(u32::from(frame.is_remote()), 1); // RTR
-            bits.push(0, 2); // r1, r0
+            // SOF, base ID 11, SRR = 1, IDE = 1, ID extension 18, RTR, r1, r0, DLC 4.
+            let raw = u64::from(id.as_raw());
+            let (base, extension) = (raw >> 18, raw & 0x3_FFFF);
+            let fields = (base << 27) | (0b11 << 25) | (extension << 7) | (rtr << 6) | dlc;
+            (fields, 39)
         }
-    }
-    bits.push(frame.dlc() as u32, 4);
-    for &byte in frame.data() {
-        bits.push(u32::from(byte), 8);
-    }
-    let crc = bits.crc15();
-    bits.push(u32::from(crc), 15);
-    bits.len + bits.stuff_bits() + UNSTUFFED_TAIL_BITS
+    };
+    let data = frame.data();
+    // CRC-15 starts from 0, and from 0 leading zero bits leave it at 0: the header can go in
+    // as whole bytes, zero-padded on the left (its top 3 bytes are always 0), and the data
+    // bytes then fall on byte boundaries.
+    let crc = crc15(header.to_be_bytes().iter().skip(3).chain(data).copied());
+    // The stuffed region, SOF to the end of the CRC, left-aligned (frame bit i is word bit
+    // 127 − i), then stuffed a byte at a time.
+    let data_bits = 8 * data.len() as u32;
+    let data_word = data
+        .iter()
+        .fold(0u128, |word, &byte| (word << 8) | u128::from(byte));
+    let len = header_len + data_bits + 15;
+    let stream = (u128::from(header) << (data_bits + 15)) | (data_word << 15) | u128::from(crc);
+    let padded = (stream << (128 - len)) | neutral_padding(stream & 1 == 1, 128 - len);
+    len + stuff_bits(padded) + UNSTUFFED_TAIL_BITS
 }
 
 /// Time a frame occupies the bus at `bitrate_bps`, in whole microseconds (rounded up).
@@ -98,73 +102,54 @@ pub fn frame_time_us(frame: &CanFrame, bitrate_bps: u32) -> u32 {
     (bits * 1_000_000).div_ceil(rate) as u32
 }
 
-/// Up to 128 bits, MSB-first: bit `i` of the frame is bit `127 - i` of `bits`.
-#[derive(Default)]
-struct BitString {
-    bits: u128,
-    len: u32,
+/// CRC-15/CAN (polynomial 0x4599, initial 0) of `bytes`, fed MSB first.
+fn crc15(bytes: impl Iterator<Item = u8>) -> u16 {
+    bytes.fold(0u16, |crc, byte| {
+        // A u8 index into a 256-entry table: always present.
+        let entry = CRC15_TABLE
+            .get(usize::from(((crc >> 7) as u8) ^ byte))
+            .copied()
+            .unwrap_or(0);
+        ((crc << 8) ^ entry) & 0x7FFF
+    })
 }
 
-impl BitString {
-    #[allow(
-        clippy::arithmetic_side_effects,
-        reason = "frame_bits pushes at most 118 bits in all: len + count ≤ 128"
-    )]
-    fn push(&mut self, value: u32, count: u32) {
-        let v = u128::from(value) & ((1u128 << count) - 1);
-        self.bits |= v << (128 - self.len - count);
-        self.len += count;
-    }
+/// The low `count` (10–94) bits of a word whose bits alternate, starting just below a last
+/// bit of value `last`: appended after a bit string, they add no stuff bits (each forms a
+/// run of 1, or of 2 with a stuff bit that ended the string), so the string can be stuffed in
+/// whole bytes.
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "count is between 10 and 94: both shifts stay below 128"
+)]
+fn neutral_padding(last: bool, count: u32) -> u128 {
+    const ALTERNATING: u128 = 0x5555_5555_5555_5555_5555_5555_5555_5555; // bit 0 set
+    // The pattern whose top padding bit (bit count − 1) is the opposite of `last`.
+    let top_set = (ALTERNATING >> (count - 1)) & 1 == 1;
+    let pattern = if top_set == last {
+        !ALTERNATING
+    } else {
+        ALTERNATING
+    };
+    pattern & ((1u128 << count) - 1)
+}
 
-    /// The byte starting at bit `at` (bits past the end read as 0).
-    fn byte_at(&self, at: u32) -> u8 {
-        (self.bits << at >> 120) as u8
-    }
-
-    /// Bit `at` (< 128).
-    fn bit(&self, at: u32) -> bool {
-        self.bits << at >> 127 == 1
-    }
-
-    /// The positions of the whole bytes, then of the bits after them.
-    fn bytes_then_bits(&self) -> (impl Iterator<Item = u32>, core::ops::Range<u32>) {
-        let whole = self.len & !7;
-        ((0..whole).step_by(8), whole..self.len)
-    }
-
-    /// CRC-15/CAN (polynomial 0x4599, initial 0) of all bits pushed so far.
-    fn crc15(&self) -> u16 {
-        let (bytes, bits) = self.bytes_then_bits();
-        let crc = bytes.fold(0u16, |crc, at| {
-            let index = usize::from(((crc >> 7) as u8) ^ self.byte_at(at));
-            let entry = CRC15_TABLE.get(index).copied().unwrap_or(0); // index < 256 always
-            ((crc << 8) ^ entry) & 0x7FFF
-        });
-        bits.fold(crc, |crc, at| crc15_bit(crc, self.bit(at)))
-    }
-
-    /// Stuff bits the transmitter inserts into these bits.
-    fn stuff_bits(&self) -> u32 {
-        let (bytes, bits) = self.bytes_then_bits();
-        let mut state = STUFF_START;
-        let mut stuffed = 0u32; // at most 29
-        for at in bytes {
-            // state < 16 and byte < 256 always.
-            let entry = STUFF_TABLE
-                .get(usize::from(state))
-                .and_then(|row| row.get(usize::from(self.byte_at(at))))
-                .copied()
-                .unwrap_or(0);
-            state = entry & 0x0F;
-            stuffed = stuffed.saturating_add(u32::from(entry >> 4));
-        }
-        for at in bits {
-            let (next, stuff) = stuff_bit(state, self.bit(at));
-            state = next;
-            stuffed = stuffed.saturating_add(u32::from(stuff));
-        }
-        stuffed
-    }
+/// Stuff bits a transmitter inserts into these 128 bits, sent MSB first.
+fn stuff_bits(bits: u128) -> u32 {
+    let (_, stuffed) =
+        bits.to_be_bytes()
+            .iter()
+            .fold((STUFF_START, 0u32), |(state, stuffed), &byte| {
+                // state < 16 and a u8 index into a 256-entry row: always present.
+                let entry = STUFF_TABLE
+                    .get(usize::from(state))
+                    .and_then(|row| row.get(usize::from(byte)))
+                    .copied()
+                    .unwrap_or(0);
+                // At most 4 per byte, 64 in all: no overflow.
+                (entry & 0x0F, stuffed.saturating_add(u32::from(entry >> 4)))
+            });
+    stuffed
 }
 
 /// One bit of CRC-15/CAN.
@@ -247,52 +232,189 @@ const STUFF_TABLE: [[u8; 256]; 16] = {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use embedded_can::{ExtendedId, StandardId};
     use proptest::prelude::*;
 
-    /// Bit-by-bit reference: CRC and stuffing computed one bit at a time.
-    fn reference_bits(frame: &CanFrame) -> u32 {
-        fn push_to(stream: &mut Vec<bool>, v: u32, n: u32) {
-            (0..n).rev().for_each(|i| stream.push((v >> i) & 1 == 1));
-        }
-        let mut stream: Vec<bool> = Vec::new();
-        let mut push = |v: u32, n: u32| push_to(&mut stream, v, n);
-        push(0, 1);
+    /// The frame's bits from SOF to the end of the data field, MSB first, as ISO 11898-1
+    /// lays them out.
+    fn spec_fields(frame: &CanFrame) -> Vec<bool> {
+        let mut bits = Vec::new();
+        let mut push = |value: u32, count: u32| {
+            (0..count)
+                .rev()
+                .for_each(|i| bits.push((value >> i) & 1 == 1))
+        };
+        push(0, 1); // SOF (dominant)
         match frame.id() {
             Id::Standard(id) => {
                 push(u32::from(id.as_raw()), 11);
-                push(u32::from(frame.is_remote()), 1);
-                push(0, 2);
+                push(u32::from(frame.is_remote()), 1); // RTR
+                push(0, 1); // IDE (dominant: standard)
+                push(0, 1); // r0
             }
             Id::Extended(id) => {
-                push(id.as_raw() >> 18, 11);
-                push(3, 2);
-                push(id.as_raw() & 0x3_FFFF, 18);
-                push(u32::from(frame.is_remote()), 1);
-                push(0, 2);
+                push(id.as_raw() >> 18, 11); // base ID
+                push(1, 1); // SRR (recessive)
+                push(1, 1); // IDE (recessive: extended)
+                push(id.as_raw() & 0x3_FFFF, 18); // ID extension
+                push(u32::from(frame.is_remote()), 1); // RTR
+                push(0, 1); // r1
+                push(0, 1); // r0
             }
         }
         push(frame.dlc() as u32, 4);
-        frame.data().iter().for_each(|b| push(u32::from(*b), 8));
-        let crc = stream.iter().fold(0u16, |c, b| crc15_bit(c, *b));
-        push_to(&mut stream, u32::from(crc), 15);
-        let (mut state, mut stuffed) = (STUFF_START, 0);
-        for b in &stream {
-            let (s, x) = stuff_bit(state, *b);
-            state = s;
-            stuffed += u32::from(x);
+        for &byte in frame.data() {
+            push(u32::from(byte), 8);
         }
-        stream.len() as u32 + stuffed + 13
+        bits
+    }
+
+    /// CRC-15 as ISO 11898-1 specifies it, one bit at a time: `CRCNXT = NXTBIT xor CRC_RG(14)`,
+    /// shift left, and if `CRCNXT` xor with 0x4599.
+    fn spec_crc15(bits: &[bool]) -> u16 {
+        let mut register = 0u16;
+        for &bit in bits {
+            let next = bit ^ (register & 0x4000 != 0);
+            register = (register << 1) & 0x7FFF;
+            if next {
+                register ^= 0x4599;
+            }
+        }
+        register
+    }
+
+    /// The bits a transmitter actually sends for `bits`: after five consecutive equal bits
+    /// (stuff bits included) it inserts one of the opposite value.
+    fn spec_stuff(bits: &[bool]) -> Vec<bool> {
+        let mut sent: Vec<bool> = Vec::new();
+        for &bit in bits {
+            sent.push(bit);
+            let tail = &sent[sent.len().saturating_sub(5)..];
+            if tail.len() == 5 && tail.iter().all(|&b| b == bit) {
+                sent.push(!bit);
+            }
+        }
+        sent
+    }
+
+    /// Bit-by-bit reference, from the spec: fields, CRC-15 over SOF..data, stuffing over
+    /// SOF..CRC, then the 13 unstuffed tail bits.
+    fn reference_bits(frame: &CanFrame) -> u32 {
+        let mut stuffable = spec_fields(frame);
+        let crc = spec_crc15(&stuffable);
+        (0..15)
+            .rev()
+            .for_each(|i| stuffable.push((crc >> i) & 1 == 1));
+        spec_stuff(&stuffable).len() as u32 + 13
+    }
+
+    /// A small deterministic generator (xorshift64*), so the exhaustive check needs no seed
+    /// handling.
+    fn next(state: &mut u64) -> u64 {
+        *state ^= *state >> 12;
+        *state ^= *state << 25;
+        *state ^= *state >> 27;
+        state.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    #[test]
+    fn frame_bits_equal_bit_by_bit_reference_for_many_frames_of_every_kind() {
+        let mut rng = 0x9E37_79B9_7F4A_7C15u64;
+        let mut checked = 0;
+        for extended in [false, true] {
+            for dlc in 0..=8usize {
+                for k in 0..2_000 {
+                    let r = next(&mut rng);
+                    // Random bytes, and bytes biased to 0x00/0xFF to make long runs.
+                    let byte = |i: usize| match k % 3 {
+                        0 => (r >> (8 * i)) as u8,
+                        1 => [0x00, 0xFF, 0x0F, 0xF8][((r >> (2 * i)) & 3) as usize],
+                        _ => 0,
+                    };
+                    let data: Vec<u8> = (0..dlc).map(byte).collect();
+                    let id = match k % 4 {
+                        0 => 0,
+                        1 => u32::MAX,
+                        _ => (r >> 32) as u32,
+                    };
+                    let frame = if extended {
+                        CanFrame::extended(id & 0x1FFF_FFFF, &data).unwrap()
+                    } else {
+                        CanFrame::standard((id & 0x7FF) as u16, &data).unwrap()
+                    };
+                    assert_eq!(frame_bits(&frame), reference_bits(&frame), "{frame:?}");
+                    let remote = if extended {
+                        CanFrame::remote(ExtendedId::new(id & 0x1FFF_FFFF).unwrap(), dlc)
+                    } else {
+                        CanFrame::remote(StandardId::new((id & 0x7FF) as u16).unwrap(), dlc)
+                    }
+                    .unwrap();
+                    assert_eq!(frame_bits(&remote), reference_bits(&remote), "{remote:?}");
+                    checked += 2;
+                }
+            }
+        }
+        assert_eq!(checked, 2 * 9 * 2_000 * 2);
+    }
+
+    #[test]
+    fn crc15_matches_the_catalogued_check_value() {
+        // CRC-15/CAN (width 15, poly 0x4599, init 0, no reflection, no final xor): the CRC of
+        // the ASCII bytes "123456789" is 0x059E (Greg Cook's CRC catalogue).
+        assert_eq!(crc15(b"123456789".iter().copied()), 0x059E);
+        let bits: Vec<bool> = b"123456789"
+            .iter()
+            .flat_map(|b| (0..8).rev().map(move |i| (b >> i) & 1 == 1))
+            .collect();
+        assert_eq!(spec_crc15(&bits), 0x059E);
+    }
+
+    #[test]
+    fn frame_whose_crc_is_zero_counts_hand_worked_stuff_bits() {
+        // Standard ID 0x000, data [0x58, 0xCF]: SOF..data is the polynomial x^17 (the DLC's
+        // one bit, 0b0010) plus 0x58CF, and 0x58CF = x^17 mod 0xC599 (x^15 ≡ 0x4599,
+        // x^16 ≡ 0x8B32 ^ 0xC599 = 0x4EAB, x^17 ≡ 0x9D56 ^ 0xC599 = 0x58CF): the message is a
+        // multiple of the generator, so its CRC is 0.
+        // Stuffable bits: 17 zeros (SOF, ID, RTR, IDE, r0, DLC 00), 1, 0, then data
+        // 0101 1000 1100 1111, then 15 CRC zeros. The 17 zeros take stuff bits after the
+        // 5th, 10th and 15th; the data has no run of five; the 15 CRC zeros take 3.
+        // 19 + 16 + 15 = 50 bits + 6 stuff bits + 13 tail bits = 69.
+        let f = CanFrame::standard(0x000, &[0x58, 0xCF]).unwrap();
+        assert_eq!(spec_crc15(&spec_fields(&f)), 0);
+        assert_eq!(frame_bits(&f), 69);
+    }
+
+    #[test]
+    fn neutral_padding_alternates_from_the_opposite_bit_and_adds_no_stuff_bits() {
+        for count in 10..=94u32 {
+            for last in [false, true] {
+                let pad = neutral_padding(last, count);
+                assert_eq!(pad >> count, 0, "{count}");
+                let pad_bits: Vec<bool> = (0..count).rev().map(|i| (pad >> i) & 1 == 1).collect();
+                assert_ne!(pad_bits[0], last);
+                assert!(pad_bits.windows(2).all(|w| w[0] != w[1]));
+                // After five equal bits: their stuff bit, and none in the padding.
+                let mut bits = vec![last; 5];
+                bits.extend(&pad_bits);
+                assert_eq!(spec_stuff(&bits).len(), 5 + 1 + count as usize);
+            }
+        }
     }
 
     proptest! {
         #[test]
-        fn table_driven_bits_equal_bit_by_bit_reference(
-            id in 0u32..0x2000_0000, extended: bool, data in proptest::collection::vec(any::<u8>(), 0..=8),
+        fn frame_bits_equal_bit_by_bit_reference(
+            id in 0u32..0x2000_0000, extended: bool, remote: bool,
+            data in proptest::collection::vec(any::<u8>(), 0..=8),
         ) {
-            let f = if extended {
-                CanFrame::extended(id, &data).unwrap()
-            } else {
-                CanFrame::standard((id & 0x7FF) as u16, &data).unwrap()
+            let f = match (extended, remote) {
+                (true, false) => CanFrame::extended(id, &data).unwrap(),
+                (false, false) => CanFrame::standard((id & 0x7FF) as u16, &data).unwrap(),
+                (true, true) => CanFrame::remote(ExtendedId::new(id).unwrap(), data.len()).unwrap(),
+                (false, true) => {
+                    CanFrame::remote(StandardId::new((id & 0x7FF) as u16).unwrap(), data.len())
+                        .unwrap()
+                }
             };
             prop_assert_eq!(frame_bits(&f), reference_bits(&f));
         }
