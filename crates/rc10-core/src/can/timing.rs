@@ -79,18 +79,17 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
         }
     };
     let data = frame.data();
-    // CRC-15 starts from 0, and from 0 leading zero bits leave it at 0: the header can go in
-    // as whole bytes, zero-padded on the left (its top 3 bytes are always 0), and the data
-    // bytes then fall on byte boundaries.
-    let crc = crc15(header.to_be_bytes().iter().skip(3).chain(data).copied());
-    // The stuffed region, SOF to the end of the CRC, left-aligned (frame bit i is word bit
-    // 127 − i), then stuffed a byte at a time.
+    // SOF to the end of the data, right-aligned: at most 39 + 64 = 103 bits.
     let data_bits = 8 * data.len() as u32;
     let data_word = data
         .iter()
         .fold(0u128, |word, &byte| (word << 8) | u128::from(byte));
+    let message = (u128::from(header) << data_bits) | data_word;
+    let crc = crc15(message);
+    // The stuffed region, SOF to the end of the CRC, left-aligned (frame bit i is word bit
+    // 127 − i) and padded so that it can be stuffed a byte at a time.
     let len = header_len + data_bits + 15;
-    let stream = (u128::from(header) << (data_bits + 15)) | (data_word << 15) | u128::from(crc);
+    let stream = (message << 15) | u128::from(crc);
     let padded = (stream << (128 - len)) | neutral_padding(stream & 1 == 1, 128 - len);
     len + stuff_bits(padded) + UNSTUFFED_TAIL_BITS
 }
@@ -102,16 +101,21 @@ pub fn frame_time_us(frame: &CanFrame, bitrate_bps: u32) -> u32 {
     (bits * 1_000_000).div_ceil(rate) as u32
 }
 
-/// CRC-15/CAN (polynomial 0x4599, initial 0) of `bytes`, fed MSB first.
-fn crc15(bytes: impl Iterator<Item = u8>) -> u16 {
-    bytes.fold(0u16, |crc, byte| {
+/// CRC-15/CAN (polynomial 0x4599, initial 0) of a message of up to 104 bits, right-aligned
+/// in `message` and fed MSB first.
+///
+/// From 0, leading zero bits leave the CRC at 0, so the message's length does not matter, and
+/// the CRC is linear: it is the XOR of each byte's own CRC followed by as many zero bytes as
+/// come after it. All 13 table lookups are independent of each other.
+fn crc15(message: u128) -> u16 {
+    message
+        .to_le_bytes()
+        .iter()
+        .zip(&CRC15_BY_DISTANCE)
         // A u8 index into a 256-entry table: always present.
-        let entry = CRC15_TABLE
-            .get(usize::from(((crc >> 7) as u8) ^ byte))
-            .copied()
-            .unwrap_or(0);
-        ((crc << 8) ^ entry) & 0x7FFF
-    })
+        .fold(0, |crc, (&byte, table)| {
+            crc ^ table.get(usize::from(byte)).copied().unwrap_or(0)
+        })
 }
 
 /// The low `count` (10–94) bits of a word whose bits alternate, starting just below a last
@@ -159,22 +163,30 @@ const fn crc15_bit(crc: u16, bit: bool) -> u16 {
     if feedback { shifted ^ 0x4599 } else { shifted }
 }
 
-/// CRC-15/CAN of each byte fed MSB-first into a register holding that byte in its top bits.
+/// Entry `[d][x]`: CRC-15/CAN, from 0, of byte `x` followed by `d` zero bytes.
 // Built at compile time: an out-of-bounds index would fail the build, not panic at run time.
 #[allow(clippy::indexing_slicing)]
-const CRC15_TABLE: [u16; 256] = {
-    let mut table = [0u16; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut crc = (i as u16) << 7;
+const CRC15_BY_DISTANCE: [[u16; 256]; 13] = {
+    let mut table = [[0u16; 256]; 13];
+    let mut byte = 0;
+    while byte < 256 {
+        let mut crc = 0u16;
         let mut k = 0;
         while k < 8 {
-            // The byte already sits in the register: shift through eight zero bits.
-            crc = crc15_bit(crc & 0x7FFF, false);
+            crc = crc15_bit(crc, (byte >> (7 - k)) & 1 == 1);
             k += 1;
         }
-        table[i] = crc;
-        i += 1;
+        let mut distance = 0;
+        while distance < 13 {
+            table[distance][byte] = crc;
+            let mut k = 0;
+            while k < 8 {
+                crc = crc15_bit(crc, false);
+                k += 1;
+            }
+            distance += 1;
+        }
+        byte += 1;
     }
     table
 };
@@ -361,7 +373,9 @@ mod tests {
     fn crc15_matches_the_catalogued_check_value() {
         // CRC-15/CAN (width 15, poly 0x4599, init 0, no reflection, no final xor): the CRC of
         // the ASCII bytes "123456789" is 0x059E (Greg Cook's CRC catalogue).
-        assert_eq!(crc15(b"123456789".iter().copied()), 0x059E);
+        let mut message = [0u8; 16];
+        message[7..].copy_from_slice(b"123456789");
+        assert_eq!(crc15(u128::from_be_bytes(message)), 0x059E);
         let bits: Vec<bool> = b"123456789"
             .iter()
             .flat_map(|b| (0..8).rev().map(move |i| (b >> i) & 1 == 1))
