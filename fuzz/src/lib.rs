@@ -17,7 +17,7 @@ pub mod remote;
 /// Bugs the fuzz targets found that are reported and not fixed yet. Each switch keeps its
 /// target away from the one input class that triggers the bug, so `fuzz/run --ci` stays
 /// useful for everything else; each has an `#[ignore]`d regression test in
-/// `crates/rc10-core/tests/fuzz_regressions.rs`. When the fix lands: set the switch to
+/// `crates/rc10-core/tests/it/fuzz_regressions.rs`. When the fix lands: set the switch to
 /// `false`, remove the test's `#[ignore]`, and run the target.
 pub mod pending {
     /// `DmMotor::new` accepts any finite positive MIT range, but with ranges near `f32::MAX`

@@ -1,0 +1,13 @@
+//! rc10-core's integration tests, one module per subject, linked into one test binary (one
+//! link instead of nine: faster `cargo test` and much faster mutation testing, where every
+//! mutant rebuilds every test binary).
+
+mod async_runners;
+mod edges;
+mod fuzz_regressions;
+mod prop_chassis;
+mod prop_commands;
+mod prop_encoder;
+mod prop_pid;
+mod prop_protocols;
+mod receiver_backoff;
