@@ -205,3 +205,17 @@ fn default_matches_frame_claims_only_declared_ids() {
     assert_eq!(bus.dispatch(&own, now), Dispatch::Handled(0));
     assert_eq!(NODE.frames.load(Ordering::Relaxed), 1);
 }
+
+#[test]
+fn gear_ratios_are_the_published_ones() {
+    // M3508 P19: 3591/187 (DJI user guide); M2006 P36: 36:1; GM6020: direct drive.
+    let m3508 = GearRatio::M3508;
+    assert_eq!((m3508.rotor_turns(), m3508.output_turns()), (3591, 187));
+    assert!((m3508.as_f32() - 19.2032).abs() < 1e-4);
+    let m2006 = GearRatio::M2006;
+    assert_eq!((m2006.rotor_turns(), m2006.output_turns()), (36, 1));
+    let custom = GearRatio::new(51, 3).unwrap();
+    assert_eq!((custom.rotor_turns(), custom.output_turns()), (51, 3));
+    assert_eq!(GearRatio::new(51, 0), None);
+    assert_eq!(GearRatio::new(0, 3), None);
+}

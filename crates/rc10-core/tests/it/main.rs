@@ -3,7 +3,9 @@
 //! mutant rebuilds every test binary).
 
 mod async_runners;
+mod bus_rules;
 mod edges;
+mod error_messages;
 mod fuzz_regressions;
 mod prop_chassis;
 mod prop_commands;

@@ -1,0 +1,145 @@
+//! The bus's bookkeeping rules that mutation testing found unpinned: the frame budget's
+//! frame count and its "load fits the limit" boundary, batch overflow reaching the bus
+//! counters, the pacer keeping its tick grid, and a real `Ticker` forgetting due ticks on
+//! resync. Expected values come from the CAN timing facts (an 8-byte standard frame is
+//! 111 bits at 1 Mbit/s) and the documented pacing rules.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
+use rc10_core::bus::{BusBuilder, BusConfig, RegisterError, TickPacer, TickSource, TickerTicks};
+use rc10_core::can::{CanFrame, IdFilter};
+use rc10_core::motor::dji::DjiMotor;
+use rc10_core::node::{BusUsage, CanNode, FrameError, MAX_FRAMES_PER_TICK, TxBatch};
+use rc10_core::time::{Duration, Instant};
+
+fn four_m3508() -> [DjiMotor; 4] {
+    [1, 2, 3, 4].map(|id| DjiMotor::m3508(id).unwrap())
+}
+
+#[test]
+fn budget_counts_feedback_and_command_frames() {
+    // Four M3508s on one bus: four feedback frames per 1 ms tick plus one 0x200 command
+    // frame = 5 frames, 5 × 111 bits of a 1000-bit tick = 55.5 % nominal load.
+    let motors = four_m3508();
+    let mut b: BusBuilder<'_, 4> = BusBuilder::new();
+    for m in &motors {
+        b.register(m).unwrap();
+    }
+    let budget = b.budget();
+    assert!((budget.frames_per_tick - 5.0).abs() < 1e-4, "{budget:?}");
+    assert_eq!(budget.command_frames_per_tick, 1);
+    assert!((budget.nominal_load_percent - 55.5).abs() < 1e-3, "{budget:?}");
+    let bus = b.build();
+    assert!((bus.budget().frames_per_tick - 5.0).abs() < 1e-4);
+}
+
+#[test]
+fn a_load_exactly_at_the_limit_fits() {
+    let motors = four_m3508();
+    let mut probe: BusBuilder<'_, 4> = BusBuilder::new();
+    for m in &motors {
+        probe.register(m).unwrap();
+    }
+    let load = probe.budget().nominal_load_percent;
+
+    // The limit is "load ≤ max_load_percent": exactly at it is accepted...
+    let at = BusConfig {
+        max_load_percent: load,
+        ..BusConfig::DEFAULT
+    };
+    let mut b: BusBuilder<'_, 4> = BusBuilder::with_config(at);
+    for m in &motors {
+        b.register(m).unwrap();
+    }
+
+    // ...and one step of f32 below it is not.
+    let below = BusConfig {
+        max_load_percent: load.next_down(),
+        ..BusConfig::DEFAULT
+    };
+    let mut b: BusBuilder<'_, 4> = BusBuilder::with_config(below);
+    for m in &motors[..3] {
+        b.register(m).unwrap();
+    }
+    assert_eq!(
+        b.register(&motors[3]),
+        Err(RegisterError::FrameBudget { load_percent: load })
+    );
+}
+
+/// A node that packs more whole frames than a tick's batch holds (and declares them all).
+struct Flood;
+
+const FLOOD_ID: u16 = 0x300;
+const FLOOD_FRAMES: u8 = 20;
+
+impl CanNode for Flood {
+    fn bus_usage(&self) -> BusUsage {
+        BusUsage::NONE.sending(IdFilter::standard(FLOOD_ID), FLOOD_FRAMES)
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, out: &mut TxBatch) {
+        let frame = CanFrame::standard(FLOOD_ID, &[0; 8]).unwrap();
+        for _ in 0..FLOOD_FRAMES {
+            let _ = out.push(frame);
+        }
+    }
+}
+
+#[test]
+fn frames_beyond_the_batch_are_counted_by_the_bus() {
+    // A software-queued transport deep enough for 20 frames, and no load limit to speak of.
+    let config = BusConfig {
+        max_load_percent: 1000.0,
+        ..BusConfig::DEFAULT.with_tx_depth(32)
+    };
+    let flood = Flood;
+    let mut b: BusBuilder<'_, 1> = BusBuilder::with_config(config);
+    b.register(&flood).unwrap();
+    let bus = b.build();
+    let mut batch = TxBatch::new();
+    let over = u32::from(FLOOD_FRAMES) - MAX_FRAMES_PER_TICK as u32;
+    bus.tick(Instant::from_micros(1000), 0.001, &mut batch);
+    assert_eq!(batch.frames().len(), MAX_FRAMES_PER_TICK);
+    assert_eq!(bus.stats().snapshot().tx_batch_overflow, over);
+    bus.tick(Instant::from_micros(2000), 0.001, &mut batch);
+    assert_eq!(bus.stats().snapshot().tx_batch_overflow, 2 * over);
+    assert_eq!(bus.stats().snapshot().tx_dropped(), 2 * over);
+}
+
+#[test]
+fn pacer_measures_lateness_against_its_grid_not_the_last_tick() {
+    // 1 ms period. Ticks at 0, 1.4 ms (0.4 ms late: within half a period, no resync) and
+    // 2.6 ms: that one is due at 2 ms on the grid, 0.6 ms late, so it re-synchronises. A
+    // pacer that restarted its grid at 1.4 ms would call it 0.2 ms late.
+    let mut p = TickPacer::new(Duration::from_millis(1));
+    assert!(p.on_tick(Instant::from_micros(0)).resync, "first tick aligns");
+    let t = p.on_tick(Instant::from_micros(1400));
+    assert!(!t.resync, "{t:?}");
+    let t = p.on_tick(Instant::from_micros(2600));
+    assert!(t.resync, "{t:?}");
+    assert_eq!(t.skipped, 0, "{t:?}");
+}
+
+#[test]
+fn ticker_resync_forgets_ticks_already_due() {
+    // A real embassy-time Ticker on the host clock. After a 55 ms stall five 10 ms ticks are
+    // due; without the reset the next tick would come at once. With it, the next tick comes a
+    // period later. (Only a lower bound on the wait is asserted: a slow machine waits longer,
+    // never shorter.)
+    let mut ticks = TickerTicks::every(Duration::from_millis(10));
+    embassy_futures::block_on(async {
+        ticks.next_tick().await;
+        std::thread::sleep(std::time::Duration::from_millis(55));
+        ticks.resync(Instant::now());
+        let start = std::time::Instant::now();
+        ticks.next_tick().await;
+        let waited = start.elapsed();
+        assert!(
+            waited >= std::time::Duration::from_millis(5),
+            "next tick after {waited:?}"
+        );
+    });
+}
