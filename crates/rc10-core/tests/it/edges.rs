@@ -219,3 +219,67 @@ fn gear_ratios_are_the_published_ones() {
     assert_eq!(GearRatio::new(51, 0), None);
     assert_eq!(GearRatio::new(0, 3), None);
 }
+
+#[test]
+fn periodic_unwrapping_with_one_non_finite_input_uses_the_half_turn_rule() {
+    // 6000 counts in one 1 ms period is more than half a turn (4096): the half-turn rule reads
+    // it as -2192, the periodic search (1 period at 6000/period) as +6000. The documented rule
+    // for non-finite inputs is the half-turn rule, whichever of the two is non-finite.
+    for (counts_per_period, gap_periods) in [(6000.0, f32::NAN), (f32::NAN, 1.0)] {
+        let mut e = Encoder::new(EncoderConfig::dji(GearRatio::DIRECT)).unwrap();
+        e.update(0).unwrap();
+        e.update_periodic(6000, counts_per_period, gap_periods)
+            .unwrap();
+        assert_eq!(
+            e.total_counts(),
+            6000 - 8192,
+            "{counts_per_period} counts/period, gap {gap_periods}"
+        );
+    }
+    // Both finite: the search finds the whole step.
+    let mut e = Encoder::new(EncoderConfig::dji(GearRatio::DIRECT)).unwrap();
+    e.update(0).unwrap();
+    e.update_periodic(6000, 6000.0, 1.0).unwrap();
+    assert_eq!(e.total_counts(), 6000);
+}
+
+/// Total counts after a first reading of 0 and one `update_periodic(raw, c, gap)`.
+fn periodic_step(raw: u16, counts_per_period: f32, gap_periods: f32) -> i64 {
+    let mut e = Encoder::new(EncoderConfig::dji(GearRatio::DIRECT)).unwrap();
+    e.update(0).unwrap();
+    e.update_periodic(raw, counts_per_period, gap_periods)
+        .unwrap();
+    e.total_counts()
+}
+
+#[test]
+fn periodic_unwrapping_follows_the_documented_search() {
+    // The rule (Encoder::update_periodic): the true interval is a whole m ≥ 1 periods within
+    // ±2 of the measured gap; for each m the step d + k·8192 nearest m·c is a candidate, and
+    // the one nearest its prediction wins; fits within 256 counts of each other are equally
+    // good and then the m nearer the measured gap wins. Worked by hand, 8192 counts per turn.
+
+    // Low speed (400 counts/period), 100 periods of silence: 40 000 counts (4.88 turns), of
+    // which the reading shows 40 000 mod 8192 = 7232. Every candidate agrees: 40 000.
+    assert_eq!(periodic_step(7232, 400.0, 100.0), 40_000);
+
+    // 1900 counts/period, one frame lost (m = 2: 3800 counts) but stamped 4.4 periods apart:
+    // m = 2 fits exactly; m = 3..6 miss by 1900, 3800, 2492, 592. Taking the stamps at face
+    // value (4.4 · 1900 = 8360) would add a turn.
+    assert_eq!(periodic_step(3800, 1900.0, 4.4), 3800);
+
+    // 3000 counts/period, gap 10: m = 8..12 only. The reading 4616 fits m = 7 exactly
+    // (21 000), but 7 is outside the window; inside, m = 10 fits best (29 192, 808 off).
+    assert_eq!(periodic_step(4616, 3000.0, 10.0), 29_192);
+    // Reading 1040 fits m = 14 exactly (42 000), outside the window; inside, m = 11 fits best
+    // (33 808, 808 off; m = 8, 9, 10, 12 are 1616, 1384, 3808, 2192 off).
+    assert_eq!(periodic_step(1040, 3000.0, 10.0), 33_808);
+
+    // Equally good fits: 2048 counts/period, reading 6344. m = 3 gives 6344 and m = 7 gives
+    // 14 536, both 200 off their predictions (6144, 14 336). The m nearer the gap wins.
+    assert_eq!(periodic_step(6344, 2048.0, 5.3), 14_536);
+    assert_eq!(periodic_step(6344, 2048.0, 4.7), 6344);
+    // 2073 counts/period, reading 6219: m = 3 fits exactly (6219), m = 7 gives 14 411, 100 off
+    // 14 511: within 256, so equally good, and 7 is nearer the gap of 5.3.
+    assert_eq!(periodic_step(6219, 2073.0, 5.3), 14_411);
+}
