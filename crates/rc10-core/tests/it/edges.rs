@@ -283,3 +283,21 @@ fn periodic_unwrapping_follows_the_documented_search() {
     // 14 511: within 256, so equally good, and 7 is nearer the gap of 5.3.
     assert_eq!(periodic_step(6219, 2073.0, 5.3), 14_411);
 }
+
+#[test]
+fn homing_to_an_absurd_angle_is_refused_and_changes_nothing() {
+    // Documented: a non-finite or absurdly large angle (beyond 10^15 rotor counts) returns
+    // false and leaves the position alone. 1e20° of an M3508 output is ~4e24 counts.
+    let mut e = Encoder::new(EncoderConfig::dji(GearRatio::M3508)).unwrap();
+    e.update(100).unwrap();
+    e.update(1100).unwrap();
+    let before = e.total_counts();
+    for angle in [1e20, -1e20, f32::MAX, f32::INFINITY, f32::NAN] {
+        assert!(!e.set_total_angle_deg(angle), "{angle}");
+        assert_eq!(e.total_counts(), before, "{angle}");
+    }
+    // A sane angle is taken: 90° of output = 8192 · 3591 / 187 / 4 counts, rounded.
+    assert!(e.set_total_angle_deg(90.0));
+    let expected = (8192.0f64 * 3591.0 / 187.0 / 4.0).round() as i64;
+    assert_eq!(e.total_counts(), expected);
+}
