@@ -374,3 +374,54 @@ fn dropping_an_undeclared_frame_keeps_the_slot_frames_around_it() {
     assert_eq!(batch.keep_declared(0, 0, &IdSet::EMPTY), 0);
     assert_eq!(batch.frames().len(), 2);
 }
+
+#[test]
+fn speed_to_angle_mode_neither_resets_nor_preloads_the_speed_loop() {
+    // Speed loop kp 0.1, ki 10, limit 20 A, at a 100 rpm error: P = 10 A, and I grows 1 A per
+    // tick until P + I reaches the 20 A limit, where anti-windup holds it: `held` = 10 A. In
+    // total-angle mode at zero angle error the angle loop asks for 0 rpm, the speed error
+    // falls from 100 to 0 rpm, and the trapezoid adds 10 · (100 + 0) / 2 · 0.001 = 0.5 A: the
+    // integral must be `held` + 0.5 A, not reset to 0, and not preloaded with the applied
+    // command (P + I = 20 A).
+    let mut c = cascade(PidConfig::new(1.0, 0.0, 0.0).with_output_limit(300.0));
+    c.set_target(ControlMode::Speed, 100.0);
+    for _ in 0..50 {
+        c.step(&Measured::default(), DT, 20.0);
+    }
+    let held = c.speed_terms().i;
+    assert!((held - 10.0).abs() < 1e-3, "{held}");
+    c.set_target(ControlMode::TotalAngle, 0.0);
+    c.step(&Measured::default(), DT, 20.0);
+    assert!(
+        (c.speed_terms().i - (held + 0.5)).abs() < 1e-4,
+        "{} vs {held} + 0.5",
+        c.speed_terms().i
+    );
+}
+
+#[test]
+fn angle_loop_settings_take_effect_while_running() {
+    // A 10° error; angle kp 1 -> 1 · 10 = 10 rpm asked of the speed loop.
+    let mut c = cascade(PidConfig::new(1.0, 0.0, 0.0).with_output_limit(300.0));
+    c.set_target(ControlMode::TotalAngle, 10.0);
+    c.step(&Measured::default(), DT, 20.0);
+    assert!((c.speed_target_rpm() - 10.0).abs() < 1e-4);
+    // New gains while running: kp 3 -> 30 rpm at the next angle-loop run.
+    c.set_angle_config(PidConfig::new(3.0, 0.0, 0.0).with_output_limit(300.0))
+        .unwrap();
+    c.set_angle_divider(1); // the angle loop now runs every tick
+    assert!(c.angle_loop_due());
+    c.step(&Measured::default(), DT, 20.0);
+    assert!(
+        (c.speed_target_rpm() - 30.0).abs() < 1e-4,
+        "{}",
+        c.speed_target_rpm()
+    );
+    // An invalid configuration is refused and changes nothing.
+    assert!(
+        c.set_angle_config(PidConfig::new(f32::NAN, 0.0, 0.0))
+            .is_err()
+    );
+    c.step(&Measured::default(), DT, 20.0);
+    assert!((c.speed_target_rpm() - 30.0).abs() < 1e-4);
+}
