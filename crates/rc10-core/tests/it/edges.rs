@@ -425,3 +425,32 @@ fn angle_loop_settings_take_effect_while_running() {
     c.step(&Measured::default(), DT, 20.0);
     assert!((c.speed_target_rpm() - 30.0).abs() < 1e-4);
 }
+
+/// A DJI feedback frame: rotor angle, rotor rpm, current 0, temperature 30 °C.
+fn dji_feedback(id: u16, raw_angle: u16, rotor_rpm: i16) -> CanFrame {
+    let [a0, a1] = raw_angle.to_be_bytes();
+    let [r0, r1] = rotor_rpm.to_be_bytes();
+    CanFrame::standard(id, &[a0, a1, r0, r1, 0, 0, 30, 0]).unwrap()
+}
+
+#[test]
+fn feedback_stamped_up_to_two_periods_after_the_last_tick_is_trusted_for_timing() {
+    // M2006 at 16 500 rotor rpm: 2252.8 counts per 1 ms feedback period. Feedback at 1 ms,
+    // ticks at 1, 2, 3 ms, then three frames lost and the next stamped 5 ms: 4 periods, 9011
+    // counts, which the reading shows as 9011 − 8192 = 819. The stamp is 2 ms after the last
+    // tick: still trusted (the documented bound is two periods), so the 4-period gap is used
+    // and the multi-turn position is exact. Distrusting it (gap taken as 1 period, window 1..3)
+    // would give 819 counts: a lost turn.
+    let m = DjiMotor::m2006(1).unwrap();
+    let t = Instant::from_micros;
+    m.update_feedback(&dji_feedback(0x201, 0, 16_500), t(1000))
+        .unwrap();
+    for tick in [1000, 2000, 3000] {
+        m.update(t(tick), DT);
+    }
+    m.update_feedback(&dji_feedback(0x201, 819, 16_500), t(5000))
+        .unwrap();
+    let deg = m.state().total_angle_deg.unwrap();
+    let expected = 9011.0 * 360.0 / (8192.0 * 36.0);
+    assert!((deg - expected).abs() < 1e-3, "{deg} vs {expected}");
+}
