@@ -27,7 +27,10 @@ fn budget_counts_feedback_and_command_frames() {
     let budget = b.budget();
     assert!((budget.frames_per_tick - 5.0).abs() < 1e-4, "{budget:?}");
     assert_eq!(budget.command_frames_per_tick, 1);
-    assert!((budget.nominal_load_percent - 55.5).abs() < 1e-3, "{budget:?}");
+    assert!(
+        (budget.nominal_load_percent - 55.5).abs() < 1e-3,
+        "{budget:?}"
+    );
     let bus = b.build();
     assert!((bus.budget().frames_per_tick - 5.0).abs() < 1e-4);
 }
@@ -115,7 +118,10 @@ fn pacer_measures_lateness_against_its_grid_not_the_last_tick() {
     // 2.6 ms: that one is due at 2 ms on the grid, 0.6 ms late, so it re-synchronises. A
     // pacer that restarted its grid at 1.4 ms would call it 0.2 ms late.
     let mut p = TickPacer::new(Duration::from_millis(1));
-    assert!(p.on_tick(Instant::from_micros(0)).resync, "first tick aligns");
+    assert!(
+        p.on_tick(Instant::from_micros(0)).resync,
+        "first tick aligns"
+    );
     let t = p.on_tick(Instant::from_micros(1400));
     assert!(!t.resync, "{t:?}");
     let t = p.on_tick(Instant::from_micros(2600));

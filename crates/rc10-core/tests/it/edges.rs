@@ -356,7 +356,9 @@ fn dropping_an_undeclared_frame_keeps_the_slot_frames_around_it() {
     );
     let mut batch = TxBatch::new();
     assert!(batch.write_slot(a0, 100));
-    batch.push(CanFrame::standard(0x300, &[1]).unwrap()).unwrap();
+    batch
+        .push(CanFrame::standard(0x300, &[1]).unwrap())
+        .unwrap();
     assert!(batch.write_slot(b1, 200));
     assert_eq!(batch.keep_declared(1, 0, &IdSet::EMPTY), 1);
     assert_eq!(batch.frames().len(), 2);
@@ -369,7 +371,9 @@ fn dropping_an_undeclared_frame_keeps_the_slot_frames_around_it() {
     assert_eq!(batch.frames()[1].raw_id(), 0x1FF);
     assert_eq!(batch.frames()[1].data(), &[0, 0, 0, 200, 0x01, 0x90, 0, 0]);
     // A whole frame pushed now is checked like any other, not mistaken for a slot frame.
-    batch.push(CanFrame::standard(0x300, &[2]).unwrap()).unwrap();
+    batch
+        .push(CanFrame::standard(0x300, &[2]).unwrap())
+        .unwrap();
     assert_eq!(batch.keep_declared(2, 0, &IdSet::EMPTY), 1);
     assert_eq!(batch.keep_declared(0, 0, &IdSet::EMPTY), 0);
     assert_eq!(batch.frames().len(), 2);
