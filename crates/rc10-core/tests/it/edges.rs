@@ -458,3 +458,60 @@ fn feedback_stamped_up_to_two_periods_after_the_last_tick_is_trusted_for_timing(
     let expected = 9011.0 * 360.0 / (8192.0 * 36.0);
     assert!((deg - expected).abs() < 1e-3, "{deg} vs {expected}");
 }
+
+#[test]
+fn homing_requested_before_feedback_waits_for_it_and_then_lets_the_motor_move() {
+    // Homing to 90° before any feedback: the first tick cannot apply it (no reading) and
+    // must keep it for a later tick; once applied, the position moves on from 90° (homing
+    // happens once, it does not pin the position).
+    let m = DjiMotor::m3508(2).unwrap();
+    let t = Instant::from_micros;
+    m.set_total_angle_here_deg(90.0).unwrap();
+    m.update(t(1000), DT);
+    m.update_feedback(&dji_feedback(0x202, 500, 0), t(1500))
+        .unwrap();
+    m.update(t(2000), DT);
+    let homed = m.state().total_angle_deg.unwrap();
+    assert!((homed - 90.0).abs() < 1e-3, "{homed}");
+    // 1000 rotor counts later: 1000 · 360 / (8192 · 3591/187) output degrees more.
+    m.update_feedback(&dji_feedback(0x202, 1500, 0), t(2500))
+        .unwrap();
+    m.update(t(3000), DT);
+    let moved = m.state().total_angle_deg.unwrap();
+    let step = 1000.0 * 360.0 * 187.0 / (8192.0 * 3591.0);
+    assert!((moved - (90.0 + step)).abs() < 1e-3, "{moved}");
+}
+
+#[test]
+fn dji_current_limit_of_zero_is_allowed_and_commands_zero() {
+    let m = DjiMotor::m3508(1).unwrap();
+    let t = Instant::from_micros;
+    m.update_feedback(&dji_feedback(0x201, 0, 0), t(500))
+        .unwrap();
+    m.set_target_current(5.0).unwrap();
+    m.set_current_limit_amps(0.0).unwrap();
+    m.update(t(1000), DT);
+    assert_eq!(m.state().command, 0.0);
+    assert_eq!(
+        m.set_current_limit_amps(-0.1),
+        Err(rc10_core::motor::TargetError::OutOfRange)
+    );
+}
+
+#[test]
+fn dji_angle_gains_set_while_running_drive_the_next_tick() {
+    // Total-angle target 30° away. With the angle loop's gains all zero it asks for 0 rpm and
+    // the speed loop (at zero speed error) commands nothing; with the default gains it would
+    // command current toward the target.
+    let m = DjiMotor::m3508(1).unwrap();
+    let t = Instant::from_micros;
+    m.update_feedback(&dji_feedback(0x201, 0, 0), t(500))
+        .unwrap();
+    m.set_angle_pid(PidConfig::new(0.0, 0.0, 0.0)).unwrap();
+    m.set_target_total_angle_deg(30.0).unwrap();
+    m.update(t(1000), DT);
+    assert_eq!(m.state().command, 0.0);
+    assert!(m.set_angle_pid(PidConfig::new(f32::NAN, 0.0, 0.0)).is_err());
+    assert_eq!(m.esc_id(), 1);
+    assert_eq!(DjiMotor::gm6020_voltage(7).unwrap().esc_id(), 7);
+}
