@@ -515,3 +515,47 @@ fn dji_angle_gains_set_while_running_drive_the_next_tick() {
     assert_eq!(m.esc_id(), 1);
     assert_eq!(DjiMotor::gm6020_voltage(7).unwrap().esc_id(), 7);
 }
+
+#[test]
+fn pid_configuration_rules_for_separation_and_the_d_filter() {
+    let base = PidConfig::new(1.0, 1.0, 0.0);
+    use rc10_core::pid::PidConfigError::{InvalidFilter, InvalidSeparation};
+    // Documented: a separation threshold or D cutoff that is NaN or negative is refused; 0 is
+    // allowed (separation 0: integrate only at zero error; cutoff 0: no filter).
+    assert_eq!(
+        base.with_integral_separation(-1.0).validate(),
+        Err(InvalidSeparation)
+    );
+    assert_eq!(
+        base.with_integral_separation(f32::NAN).validate(),
+        Err(InvalidSeparation)
+    );
+    assert_eq!(base.with_integral_separation(0.0).validate(), Ok(()));
+    assert_eq!(base.with_d_cutoff_hz(-1.0).validate(), Err(InvalidFilter));
+    assert_eq!(base.with_d_cutoff_hz(f32::NAN).validate(), Err(InvalidFilter));
+    assert_eq!(base.with_d_cutoff_hz(0.0).validate(), Ok(()));
+}
+
+#[test]
+fn a_d_filter_added_by_live_tuning_filters_the_next_step() {
+    // kd = 1 s; the measurement jumps by 1 in 1 ms: unfiltered D = -1000. Live-tuned to a
+    // 10 Hz first-order filter (tau = 1/(2π·10) s, backward Euler: alpha = dt / (tau + dt)
+    // = 0.0591), starting from the present D of 0: D = -1000 · 0.0591 = -59.1.
+    let mut pid = Pid::new(PidConfig::new(0.0, 0.0, 1.0)).unwrap();
+    pid.update(0.0, 0.0, DT);
+    pid.set_config(PidConfig::new(0.0, 0.0, 1.0).with_d_cutoff_hz(10.0))
+        .unwrap();
+    let t = pid.update(0.0, 1.0, DT);
+    let tau = 1.0 / (2.0 * core::f32::consts::PI * 10.0);
+    let expected = -1000.0 * DT / (tau + DT);
+    assert!((t.d - expected).abs() < 0.5, "{t:?} vs {expected}");
+}
+
+#[test]
+fn dji_motor_debug_names_model_and_id() {
+    let s = format!("{:?}", DjiMotor::m2006(5).unwrap());
+    assert!(
+        s.contains("DjiMotor") && s.contains("M2006") && s.contains('5'),
+        "{s}"
+    );
+}
