@@ -149,3 +149,31 @@ fn ticker_resync_forgets_ticks_already_due() {
         );
     });
 }
+
+/// A node that listens on more IDs than an `IdSet` holds (and sends nothing).
+struct Eavesdropper;
+
+impl CanNode for Eavesdropper {
+    fn bus_usage(&self) -> BusUsage {
+        let mut usage = BusUsage::NONE;
+        for id in 0x600..0x600 + rc10_core::node::ID_SET_CAPACITY as u16 + 1 {
+            usage = usage.listening(IdFilter::standard(id), 10);
+        }
+        usage
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, _out: &mut TxBatch) {}
+}
+
+#[test]
+fn a_listen_set_that_overflowed_is_refused_even_with_nothing_to_send() {
+    // The set dropped its seventh filter: registering it would silently deafen the node to
+    // that ID, so registration refuses it.
+    assert!(Eavesdropper.bus_usage().listen.overflowed());
+    let node = Eavesdropper;
+    let mut b: BusBuilder<'_, 2> = BusBuilder::new();
+    assert_eq!(b.register(&node), Err(RegisterError::TooManyIds));
+}

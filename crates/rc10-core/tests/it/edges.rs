@@ -532,7 +532,10 @@ fn pid_configuration_rules_for_separation_and_the_d_filter() {
     );
     assert_eq!(base.with_integral_separation(0.0).validate(), Ok(()));
     assert_eq!(base.with_d_cutoff_hz(-1.0).validate(), Err(InvalidFilter));
-    assert_eq!(base.with_d_cutoff_hz(f32::NAN).validate(), Err(InvalidFilter));
+    assert_eq!(
+        base.with_d_cutoff_hz(f32::NAN).validate(),
+        Err(InvalidFilter)
+    );
     assert_eq!(base.with_d_cutoff_hz(0.0).validate(), Ok(()));
 }
 
