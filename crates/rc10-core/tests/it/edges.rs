@@ -562,3 +562,50 @@ fn dji_motor_debug_names_model_and_id() {
         "{s}"
     );
 }
+
+#[test]
+fn swerve_steering_stays_in_its_documented_range_when_driving_straight_back() {
+    // Driving backwards (vx = -1 m/s) with vy = -0.0: for the rear modules (x < 0) the module
+    // velocity's y part is -0.0 + 0·x = -0.0, and atan2(-0.0, -1) = -π. The documented range
+    // of a steering angle is (-π, π]: every module must say π, wheel forward at
+    // 1 m/s / 0.05 m = 20 rad/s = 190.99 rpm.
+    use rc10_core::chassis::{ModuleState, Swerve, Twist};
+    let s = Swerve::new(0.4, 0.3, 0.05).unwrap();
+    let current = [ModuleState {
+        steer_rad: core::f32::consts::PI,
+        wheel_rpm: 0.0,
+    }; 4];
+    let out = s.modules(Twist::new(-1.0, -0.0, 0.0), &current);
+    for m in out {
+        assert_eq!(m.steer_rad, core::f32::consts::PI, "{out:?}");
+        assert!((m.wheel_rpm - 20.0 * 60.0 / core::f32::consts::TAU).abs() < 1e-2);
+    }
+}
+
+#[test]
+fn swerve_odometry_of_a_non_finite_module_is_zero_not_nan() {
+    use rc10_core::chassis::{ModuleState, Swerve, Twist};
+    let s = Swerve::new(0.4, 0.3, 0.05).unwrap();
+    let good = ModuleState {
+        steer_rad: 0.0,
+        wheel_rpm: 100.0,
+    };
+    for bad in [
+        ModuleState {
+            steer_rad: 0.0,
+            wheel_rpm: f32::NAN,
+        },
+        ModuleState {
+            steer_rad: f32::INFINITY,
+            wheel_rpm: 100.0,
+        },
+    ] {
+        assert_eq!(s.twist(&[good, good, good, bad]), Twist::ZERO, "{bad:?}");
+    }
+    // All finite: 100 rpm forward on every module = 100 · 2π/60 · 0.05 m/s forward.
+    let t = s.twist(&[good; 4]);
+    assert!(
+        (t.vx_m_s - 100.0 * core::f32::consts::TAU / 60.0 * 0.05).abs() < 1e-4,
+        "{t:?}"
+    );
+}
