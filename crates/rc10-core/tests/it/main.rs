@@ -6,6 +6,7 @@ mod async_runners;
 mod bus_rules;
 mod edges;
 mod error_messages;
+mod filters_and_limiters;
 mod fuzz_regressions;
 mod prop_chassis;
 mod prop_commands;
