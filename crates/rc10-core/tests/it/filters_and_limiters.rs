@@ -69,3 +69,13 @@ fn clamp_twist_limits_each_axis() {
         Twist::new(-2.0, 0.25, -3.0)
     );
 }
+
+#[test]
+fn ramp_reset_jumps_to_a_finite_value() {
+    let mut r = Ramp::new(1000.0, 0.0);
+    r.reset(250.0);
+    assert_eq!(r.output(), 250.0);
+    assert_eq!(r.update(300.0, 0.001), 251.0); // and ramps on from there
+    r.reset(f32::NAN); // ignored
+    assert_eq!(r.output(), 251.0);
+}
