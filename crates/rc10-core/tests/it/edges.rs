@@ -609,3 +609,25 @@ fn swerve_odometry_of_a_non_finite_module_is_zero_not_nan() {
         "{t:?}"
     );
 }
+
+#[test]
+fn wrap_signed_refuses_bad_periods_and_stays_in_range_at_the_extremes() {
+    use rc10_core::math::wrap_signed;
+    // Documented: 0.0 for a non-finite value or a non-finite or non-positive period.
+    for (value, period) in [
+        (10.0, -360.0),
+        (10.0, 0.0),
+        (10.0, f32::INFINITY),
+        (10.0, f32::NAN),
+        (f32::NAN, 360.0),
+        (f32::INFINITY, 360.0),
+    ] {
+        assert_eq!(wrap_signed(value, period), 0.0, "{value} {period}");
+    }
+    // Always within [-period/2, period/2), even where value + period/2 overflows.
+    let half = f32::MAX / 2.0;
+    for value in [f32::MAX, -f32::MAX, f32::MAX / 1.5] {
+        let w = wrap_signed(value, f32::MAX);
+        assert!((-half..half).contains(&w), "{value} -> {w}");
+    }
+}

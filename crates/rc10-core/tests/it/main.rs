@@ -8,6 +8,7 @@ mod edges;
 mod error_messages;
 mod filters_and_limiters;
 mod fuzz_regressions;
+mod motor_trait;
 mod prop_chassis;
 mod prop_commands;
 mod prop_encoder;
