@@ -15,3 +15,4 @@ mod prop_encoder;
 mod prop_pid;
 mod prop_protocols;
 mod receiver_backoff;
+mod small_apis;
