@@ -4,6 +4,7 @@
 
 mod async_runners;
 mod bus_rules;
+mod can_parts;
 mod edges;
 mod error_messages;
 mod filters_and_limiters;
