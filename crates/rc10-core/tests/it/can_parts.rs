@@ -83,3 +83,34 @@ fn rates_divide_counts_by_the_interval() {
     assert!((r.tx_dropped_per_s - 5.0).abs() < 1e-4, "{r:?}");
     assert!((r.load_percent - 50.0).abs() < 1e-3, "{r:?}");
 }
+
+/// A transport that implements only `try_send` (it can tell nothing else).
+struct Plain(u32);
+
+impl CanTransmit for Plain {
+    fn try_send(&mut self, _frame: &CanFrame) -> Result<(), rc10_core::can::SendError> {
+        self.0 += 1;
+        Ok(())
+    }
+}
+
+#[test]
+fn a_transport_that_cannot_tell_reports_nothing_queued_and_error_active() {
+    let t = Plain(0);
+    assert_eq!(t.still_queued(), 0);
+    assert_eq!(t.status(), rc10_core::can::BusStatus::default());
+    assert_eq!(t.status().state, rc10_core::can::ErrorState::Active);
+}
+
+#[test]
+fn a_borrowed_transport_forwards_everything() {
+    use rc10_core::can::SendError;
+    fn via<T: CanTransmit>(mut tx: T, f: &CanFrame) -> (Result<(), SendError>, u8) {
+        (tx.try_send(f), tx.still_queued())
+    }
+    let mut q: TxQueue<1> = TxQueue::new();
+    let f = CanFrame::standard(0x200, &[0; 8]).unwrap();
+    assert_eq!(via(&mut q, &f), (Ok(()), 1));
+    assert_eq!(via(&mut q, &f), (Err(SendError::Full), 1));
+    assert_eq!(q.len(), 1);
+}
