@@ -5,6 +5,7 @@
 mod async_runners;
 mod bus_rules;
 mod can_parts;
+mod dm_commands;
 mod edges;
 mod error_messages;
 mod filters_and_limiters;
