@@ -10,6 +10,7 @@ mod edges;
 mod error_messages;
 mod filters_and_limiters;
 mod fuzz_regressions;
+mod more_devices;
 mod motor_trait;
 mod prop_chassis;
 mod prop_commands;
