@@ -160,3 +160,13 @@ fn incremental_pid_gains_a_tracking_differentiator_by_live_tuning() {
     assert_eq!(retuned.output(), built.output());
     assert_ne!(built.output(), without.output());
 }
+
+#[test]
+fn tracking_differentiator_reports_its_rate() {
+    use rc10_core::pid::TrackingDifferentiator;
+    assert_eq!(TrackingDifferentiator::new(50.0).unwrap().r_rad_s(), 50.0);
+    assert_eq!(
+        TrackingDifferentiator::new(0.0).unwrap_err(),
+        PidConfigError::InvalidTrackingRate
+    );
+}
