@@ -18,4 +18,5 @@ mod prop_encoder;
 mod prop_pid;
 mod prop_protocols;
 mod receiver_backoff;
+mod remotes;
 mod small_apis;
