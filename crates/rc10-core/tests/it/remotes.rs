@@ -92,3 +92,14 @@ fn tracking_differentiator_smooths_a_step() {
         "after a long gap: restarted at the input"
     );
 }
+
+#[test]
+fn sbus_frame_lost_flag_is_bit_2_of_the_flags_byte() {
+    use rc10_core::remote::ReceiverFrame;
+    let mut f = sbus_all(992);
+    assert!(!SbusFrame::parse(&f).unwrap().frame_lost());
+    f[23] = 0x04;
+    let lost = SbusFrame::parse(&f).unwrap();
+    assert!(lost.frame_lost());
+    assert!(!lost.failsafe());
+}
