@@ -255,28 +255,29 @@ impl SimBus {
         if self.on_wire.is_some() {
             return;
         }
-        let mut best: Option<(u64, Sender)> = None;
+        // The controller's offer first, then each device's: on equal keys the first stays.
         let mcu_next = self.mcu_next();
-        let candidates = mcu_next
+        let mut best: Option<(u64, Sender)> = mcu_next
             .and_then(|i| self.mcu_tx.get(i))
-            .map(|(_, f)| (Sender::Mcu, f))
-            .into_iter()
-            .chain(
-                self.device_tx
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, q)| q.front().map(|f| (Sender::Device(i), f))),
-            );
-        for (sender, frame) in candidates {
-            let key = arbitration_key(frame);
-            if best.is_none_or(|(k, _)| key < k) {
-                best = Some((key, sender));
+            .map(|(_, f)| (arbitration_key(f), Sender::Mcu));
+        for (i, q) in self.device_tx.iter().enumerate() {
+            if let Some(f) = q.front() {
+                let key = arbitration_key(f);
+                if best.is_none_or(|(k, _)| key < k) {
+                    best = Some((key, Sender::Device(i)));
+                }
             }
         }
         let Some((_, sender)) = best else { return };
         let frame = match sender {
             Sender::Mcu => mcu_next
-                .and_then(|i| self.mcu_tx.remove(i))
+                .and_then(|i| {
+                    if i == 0 {
+                        self.mcu_tx.pop_front()
+                    } else {
+                        self.mcu_tx.remove(i)
+                    }
+                })
                 .map(|(seq, f)| (f, Some(seq))),
             Sender::Device(i) => self
                 .device_tx

@@ -35,9 +35,6 @@ pub fn step_metrics(
     y0: f64,
     target: f64,
 ) -> StepMetrics {
-    let delta = target - y0;
-    let size = delta.abs().max(f64::EPSILON);
-    let dir = delta.signum();
     let samples: Vec<(f64, f64, f64)> = t_s
         .iter()
         .zip(y)
@@ -45,6 +42,19 @@ pub fn step_metrics(
         .filter(|((t, _), _)| **t >= t0_s)
         .map(|((t, y), i)| (*t, *y, *i))
         .collect();
+    step_metrics_of(&samples, t0_s, y0, target)
+}
+
+/// [`step_metrics`] of `(time s, value, current A)` samples, all at or after `t0_s`.
+pub(crate) fn step_metrics_of(
+    samples: &[(f64, f64, f64)],
+    t0_s: f64,
+    y0: f64,
+    target: f64,
+) -> StepMetrics {
+    let delta = target - y0;
+    let size = delta.abs().max(f64::EPSILON);
+    let dir = delta.signum();
     let progress = |v: f64| (v - y0) * dir / size;
     let first_reaching = |fraction: f64| {
         samples

@@ -217,6 +217,12 @@ pub struct DjiEsc {
     feedback_phase_us: u64,
     /// `(dt, 1 − e^(−dt/τ))` of the electrical lag for the last `dt` (steps are constant).
     lag: (f64, f64),
+    /// The command frame's ID and the offset of this ESC's 2 bytes in it, if `esc_id` has a
+    /// command slot (worked out once: every frame on the bus is offered to every ESC).
+    command_slot: Option<(u32, usize)>,
+    /// For a current loop with ordinary constants: speed-gradient × torque constant, which
+    /// turns amps into rpm of headroom (see [`DjiEsc::inside_torque_speed_line`]).
+    rpm_per_amp: Option<f64>,
 }
 
 impl DjiEsc {
@@ -235,7 +241,52 @@ impl DjiEsc {
             locked: false,
             feedback_phase_us: feedback_phase_us % 1000,
             lag: (0.0, 0.0),
+            command_slot: params
+                .model
+                .command_slot(esc_id)
+                .map(|slot| (u32::from(slot.id()), 2 * usize::from(slot.index()))),
+            rpm_per_amp: match params.drive {
+                Drive::CurrentLoop {
+                    gradient_rpm_per_nm,
+                    ..
+                } => {
+                    let normal = |x: f64| x.is_finite() && x >= 1e-100;
+                    let product = gradient_rpm_per_nm * params.torque_constant_nm_per_a;
+                    (normal(gradient_rpm_per_nm)
+                        && normal(params.torque_constant_nm_per_a)
+                        && normal(product))
+                    .then_some(product)
+                }
+                Drive::Voltage { .. } => None,
+            },
         }
+    }
+
+    /// Whether the current `i` lies strictly inside the torque–speed line's bounds in its own
+    /// direction (`|i| < (no_load_rpm ∓ n) / gradient / kt`) and within `limit_amps`, so that
+    /// the clamp in [`step`](Self::step) would return `i` itself. Decided with one
+    /// multiplication instead of the bounds' five divisions; when it is not clearly inside,
+    /// `false`, and the exact bounds decide.
+    ///
+    /// Why it never says `true` wrongly: the speed here (`ω · 60/2π`) differs from the exact
+    /// one (`ω · 60 / 2π`) by a few ulps, the exact bound divides by the gradient and then by
+    /// kt (two roundings), and `|i| · rpm_per_amp` rounds once: together a few parts in 1e16
+    /// of `no_load_rpm + |n|`, far inside the margin of 1e-12 of it plus 1e-9 relative. Tiny
+    /// (subnormal) headroom is left to the exact path; NaN compares false.
+    fn inside_torque_speed_line(&self, i: f64, no_load_rpm: f64, limit_amps: f64) -> bool {
+        const RPM_PER_RAD_S: f64 = 60.0 / TAU;
+        let Some(rpm_per_amp) = self.rpm_per_amp else {
+            return false;
+        };
+        let n = self.omega * RPM_PER_RAD_S;
+        let toward = if i >= 0.0 {
+            no_load_rpm - n
+        } else {
+            no_load_rpm + n
+        };
+        let margin = (no_load_rpm.abs() + n.abs()) * 1e-12;
+        let headroom_rpm = (toward - margin) * (1.0 - 1e-9);
+        i.abs() <= limit_amps && headroom_rpm > 1e-200 && i.abs() * rpm_per_amp < headroom_rpm
     }
 
     /// The electrical lag's step factor for `dt_s` with time constant `tau_s`, cached.
@@ -315,17 +366,16 @@ impl DjiEsc {
         if !self.powered || frame.is_extended() {
             return;
         }
-        let Some(slot) = self.params.model.command_slot(self.esc_id) else {
+        let Some((id, offset)) = self.command_slot else {
             return;
         };
-        if frame.raw_id() != u32::from(slot.id()) {
+        if frame.raw_id() != id {
             return;
         }
-        if let Some(d) = frame.data8() {
-            let i = 2 * usize::from(slot.index());
-            if let Some(&[hi, lo]) = d.get(i..i + 2) {
-                self.command_raw = f64::from(i16::from_be_bytes([hi, lo]));
-            }
+        if let Some(d) = frame.data8()
+            && let Some(&[hi, lo]) = d.get(offset..offset + 2)
+        {
+            self.command_raw = f64::from(i16::from_be_bytes([hi, lo]));
         }
     }
 
@@ -347,13 +397,19 @@ impl DjiEsc {
             } => {
                 let target = (command * amps_per_raw).clamp(-limit_amps, limit_amps);
                 let i = self.current + (target - self.current) * self.lag_factor(dt_s, tau_s);
-                // Voltage headroom: in the direction of motion the torque cannot exceed the
-                // torque–speed line.
-                let n = self.speed_rpm();
-                let headroom_nm = |dir: f64| (no_load_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
-                let max_pos = headroom_nm(1.0) / p.torque_constant_nm_per_a;
-                let max_neg = headroom_nm(-1.0) / p.torque_constant_nm_per_a;
-                i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
+                if self.inside_torque_speed_line(i, no_load_rpm, limit_amps) {
+                    // The clamp below would return `i` itself: skip its divisions.
+                    i
+                } else {
+                    // Voltage headroom: in the direction of motion the torque cannot exceed
+                    // the torque–speed line.
+                    let n = self.speed_rpm();
+                    let headroom_nm =
+                        |dir: f64| (no_load_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
+                    let max_pos = headroom_nm(1.0) / p.torque_constant_nm_per_a;
+                    let max_neg = headroom_nm(-1.0) / p.torque_constant_nm_per_a;
+                    i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
+                }
             }
             Drive::Voltage {
                 volts_per_raw,
@@ -404,15 +460,11 @@ impl DjiEsc {
     /// The feedback frame the ESC sends now (DJI layout, all quantised as the real ESC does).
     pub fn feedback_frame(&self) -> Option<CanFrame> {
         let p = self.params;
-        let counts = (self.rotor_angle / TAU * 8192.0).floor().rem_euclid(8192.0) as u16;
-        let rotor_rpm = (self.omega * p.gear_ratio * 60.0 / TAU)
-            .round()
-            .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
-        let current_raw = (self.current / p.feedback_amps_per_raw)
-            .round()
-            .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+        let counts = encoder_counts(self.rotor_angle / TAU * 8192.0);
+        let rotor_rpm = round_to_i16(self.omega * p.gear_ratio * 60.0 / TAU);
+        let current_raw = round_to_i16(self.current / p.feedback_amps_per_raw);
         let temp = if p.reports_temperature {
-            self.temperature.round().clamp(0.0, 255.0) as u8
+            round_to_u8(self.temperature)
         } else {
             0
         };
@@ -423,6 +475,55 @@ impl DjiEsc {
             p.model.feedback_id(self.esc_id),
             &[a[0], a[1], r[0], r[1], c[0], c[1], temp, 0],
         )
+    }
+}
+
+/// The largest magnitude the fast paths below take: below 2^52, truncating to an integer and
+/// taking the fraction (`x − trunc(x)`) are exact.
+const EXACT_TRUNCATION_LIMIT: f64 = 1e15;
+
+/// `x.round()` (half away from zero) as an integer, for |x| < [`EXACT_TRUNCATION_LIMIT`]:
+/// the same value without the library call (`round` is one on x86-64's baseline).
+fn round_exact(x: f64) -> i64 {
+    let whole = x as i64; // towards zero
+    let fraction = x - whole as f64; // exact, in (−1, 1)
+    if fraction >= 0.5 {
+        whole + 1
+    } else if fraction <= -0.5 {
+        whole - 1
+    } else {
+        whole
+    }
+}
+
+/// `x.round().clamp(i16::MIN, i16::MAX) as i16`, bit for bit, quickly for ordinary values.
+fn round_to_i16(x: f64) -> i16 {
+    if x.abs() < EXACT_TRUNCATION_LIMIT {
+        round_exact(x).clamp(i16::MIN.into(), i16::MAX.into()) as i16
+    } else {
+        x.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+    }
+}
+
+/// `x.round().clamp(0.0, 255.0) as u8`, bit for bit, quickly for ordinary values.
+fn round_to_u8(x: f64) -> u8 {
+    if x.abs() < EXACT_TRUNCATION_LIMIT {
+        round_exact(x).clamp(0, 255) as u8
+    } else {
+        x.round().clamp(0.0, 255.0) as u8
+    }
+}
+
+/// `x.floor().rem_euclid(8192.0) as u16` (the encoder count of a rotor position in counts),
+/// bit for bit, quickly for ordinary values: the floor of an integer-valued float and its
+/// remainder are exact in either arithmetic.
+fn encoder_counts(x: f64) -> u16 {
+    if x.abs() < EXACT_TRUNCATION_LIMIT {
+        let whole = x as i64; // towards zero
+        let floor = if whole as f64 > x { whole - 1 } else { whole };
+        floor.rem_euclid(8192) as u16
+    } else {
+        x.floor().rem_euclid(8192.0) as u16
     }
 }
 
@@ -466,6 +567,160 @@ mod tests {
         let f = esc.feedback_frame().unwrap();
         assert_eq!(f.raw_id(), 0x203);
         assert_eq!(f.data(), &[0x10, 0x00, 0x00, 0xC0, 0x08, 0x00, 25, 0]);
+    }
+
+    /// Values around every rounding edge the fast paths must match: ties, just inside and
+    /// outside them, signed zeros, the i16/u8/8192 edges, the fast-path limit, non-finite.
+    fn awkward_values() -> Vec<f64> {
+        let mut v = vec![
+            0.0,
+            -0.0,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MIN_POSITIVE,
+        ];
+        for base in [
+            0.0,
+            1.0,
+            2.0,
+            255.0,
+            256.0,
+            8191.0,
+            8192.0,
+            16384.0,
+            32767.0,
+            32768.0,
+            1e6,
+            1e15,
+            4503599627370496.0,
+            9007199254740992.0,
+            1e19,
+            1e300,
+        ] {
+            for offset in [0.0, 0.5, -0.5, 0.25, 0.75, 1.0 - 1e-9] {
+                for sign in [1.0, -1.0] {
+                    let x: f64 = sign * (base + offset);
+                    v.extend([x, x.next_up(), x.next_down()]);
+                }
+            }
+        }
+        // A deterministic spread over ±1e5 and ±1e16.
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        for _ in 0..20_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let unit = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            v.extend([unit * 2e5, unit * 2e16, unit * 600.0]);
+        }
+        v
+    }
+
+    #[test]
+    fn fast_rounding_matches_the_library_bit_for_bit() {
+        for x in awkward_values() {
+            let i16_ref = x.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+            assert_eq!(round_to_i16(x), i16_ref, "{x:e}");
+            assert_eq!(round_to_u8(x), x.round().clamp(0.0, 255.0) as u8, "{x:e}");
+            assert_eq!(
+                encoder_counts(x),
+                x.floor().rem_euclid(8192.0) as u16,
+                "{x:e}"
+            );
+        }
+    }
+
+    /// The clamp `step` applies to a current-loop ESC's current, computed in full.
+    fn exact_torque_speed_clamp(esc: &DjiEsc, i: f64) -> f64 {
+        let Drive::CurrentLoop {
+            limit_amps,
+            no_load_rpm,
+            gradient_rpm_per_nm,
+            ..
+        } = esc.params.drive
+        else {
+            unreachable!("current-loop models only")
+        };
+        let n = esc.speed_rpm();
+        let headroom_nm = |dir: f64| (no_load_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
+        let max_pos = headroom_nm(1.0) / esc.params.torque_constant_nm_per_a;
+        let max_neg = headroom_nm(-1.0) / esc.params.torque_constant_nm_per_a;
+        i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
+    }
+
+    #[test]
+    fn torque_speed_shortcut_is_taken_only_where_the_exact_clamp_returns_the_current() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut unit = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut taken, mut checked) = (0u32, 0u32);
+        for params in [
+            MotorParams::m3508(),
+            MotorParams::m2006(),
+            MotorParams::for_model(DjiModel::Gm6020Current),
+        ] {
+            let Drive::CurrentLoop {
+                limit_amps,
+                no_load_rpm,
+                gradient_rpm_per_nm,
+                ..
+            } = params.drive
+            else {
+                unreachable!()
+            };
+            let mut esc = DjiEsc::new(params, 1, Load::default(), 0);
+            for k in 0..40_000 {
+                // Speeds across ±1.5 × no-load (and exactly at it), currents across the limit
+                // and right at both bounds, where the shortcut must step aside.
+                let rpm = match k % 5 {
+                    0 => no_load_rpm,
+                    1 => -no_load_rpm,
+                    _ => (unit() - 0.5) * 3.0 * no_load_rpm,
+                };
+                esc.omega = rpm * TAU / 60.0;
+                let n = esc.speed_rpm();
+                let bound = (no_load_rpm - n.abs()).max(0.0)
+                    / gradient_rpm_per_nm
+                    / params.torque_constant_nm_per_a;
+                let sign = if unit() < 0.5 { 1.0 } else { -1.0 };
+                let edge = sign * bound.min(limit_amps);
+                let i = match k % 7 {
+                    0 => edge,
+                    1 => edge * (1.0 + 1e-13),
+                    2 => edge * (1.0 - 1e-13),
+                    3 => edge.next_up(),
+                    4 => edge.next_down(),
+                    _ => (unit() - 0.5) * 2.4 * limit_amps,
+                };
+                for i in [i, -i, 0.0, -0.0, f64::NAN, limit_amps, -limit_amps] {
+                    checked += 1;
+                    if esc.inside_torque_speed_line(i, no_load_rpm, limit_amps) {
+                        taken += 1;
+                        let exact = exact_torque_speed_clamp(&esc, i);
+                        assert_eq!(exact.to_bits(), i.to_bits(), "rpm {rpm} i {i:e}");
+                    }
+                }
+            }
+        }
+        // The shortcut does its job most of the time.
+        assert!(taken > checked / 3, "{taken} of {checked}");
+    }
+
+    #[test]
+    fn torque_speed_shortcut_is_off_for_unusual_constants() {
+        let mut params = MotorParams::m3508();
+        params.torque_constant_nm_per_a = -0.25;
+        let esc = DjiEsc::new(params, 1, Load::default(), 0);
+        assert!(!esc.inside_torque_speed_line(0.0, 482.0, 20.0));
+        let esc = DjiEsc::new(MotorParams::gm6020_voltage(), 1, Load::default(), 0);
+        assert!(!esc.inside_torque_speed_line(0.0, 482.0, 20.0));
+        let esc = DjiEsc::new(MotorParams::m3508(), 1, Load::default(), 0);
+        assert!(esc.inside_torque_speed_line(0.0, 482.0, 20.0));
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! Step-response figures of a run's target profiles, measured on the physical signal.
 
 use super::{MotorSample, Sample, TargetKind, TargetSpec};
-use crate::metrics::{StepMetrics, step_metrics};
+use crate::metrics::{StepMetrics, step_metrics_of};
 use rc10_core::math::wrap_deg_180;
 
 /// Step metrics of one target profile's last step.
@@ -39,18 +39,22 @@ pub(super) fn target_metrics(
         TargetKind::AngleDeg => y0 + f64::from(wrap_deg_180(value - y0 as f32)),
         _ => f64::from(value),
     };
-    let (mut t, mut y, mut i) = (Vec::new(), Vec::new(), Vec::new());
+    // What `step_metrics` would collect from separate time, value and current series, built
+    // in one go.
+    let t0_s = at_ms as f64 * 1e-3;
+    let mut series = Vec::with_capacity(samples.len());
     for s in samples.iter().filter(|s| s.t_ms >= at_ms) {
         if let Some(m) = pick(s) {
-            t.push(s.t_ms as f64 * 1e-3);
-            y.push(signal(&m));
-            i.push(m.current_amps);
+            let t = s.t_ms as f64 * 1e-3;
+            if t >= t0_s {
+                series.push((t, signal(&m), m.current_amps));
+            }
         }
     }
     Some(TargetMetrics {
         target: index,
         motor: spec.motor,
         kind: spec.kind,
-        metrics: step_metrics(&t, &y, &i, at_ms as f64 * 1e-3, y0, target),
+        metrics: step_metrics_of(&series, t0_s, y0, target),
     })
 }

@@ -169,9 +169,12 @@ pub fn run_observed(
     let mut rx_fifo: std::collections::VecDeque<CanFrame> = Default::default();
     let mut rx_overruns = 0u64;
 
+    // The earliest of `next_feedback`, kept up to date when a feedback time moves.
+    let mut next_feedback_min = next_feedback.iter().copied().min();
+
     loop {
         let mut t = next_plant.min(next_tick);
-        if let Some(&f) = next_feedback.iter().min() {
+        if let Some(f) = next_feedback_min {
             t = t.min(f);
         }
         if let Some(b) = bus.busy_until() {
@@ -250,17 +253,20 @@ pub fn run_observed(
             next_plant += PLANT_STEP_US;
         }
 
-        for (i, esc) in escs.iter().enumerate() {
-            if next_feedback.get(i) == Some(&t) {
-                if esc.feedback_due(t)
-                    && let Some(frame) = esc.feedback_frame()
-                {
-                    bus.device_send(i, frame);
-                }
-                if let Some(n) = next_feedback.get_mut(i) {
-                    *n += TICK_US;
+        if next_feedback_min == Some(t) {
+            for (i, esc) in escs.iter().enumerate() {
+                if next_feedback.get(i) == Some(&t) {
+                    if esc.feedback_due(t)
+                        && let Some(frame) = esc.feedback_frame()
+                    {
+                        bus.device_send(i, frame);
+                    }
+                    if let Some(n) = next_feedback.get_mut(i) {
+                        *n += TICK_US;
+                    }
                 }
             }
+            next_feedback_min = next_feedback.iter().copied().min();
         }
 
         if t == next_tick {
