@@ -6,6 +6,7 @@ use plotters::prelude::*;
 use rc10_core::chassis::Twist;
 use std::fmt::Write as _;
 use std::io;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 fn opt_ms(v: Option<f64>) -> String {
@@ -134,9 +135,61 @@ fn chassis_summary(scenario: &Scenario, result: &RunResult) -> Option<String> {
     Some(s)
 }
 
+/// Appends `v` with `decimals` (0 to 4) digits after the point, the same text as
+/// `format!("{v:.decimals$}")` (an f32 widened to f64 prints the same), in a fraction of the
+/// time: the standard formatter rounds the exact binary value with big-number arithmetic,
+/// which made writing a trace cost four times the simulation it records.
+///
+/// Ordinary values (|v| < 1e9) are scaled by 10^decimals and rounded as an integer. A scaled
+/// value that lands exactly on a half could be a true tie or a rounded near-tie; it, and
+/// non-finite or huge values, go to the standard formatter.
+fn push_fixed(out: &mut Vec<u8>, v: f64, decimals: usize) {
+    const SCALE: [u64; 5] = [1, 10, 100, 1_000, 10_000];
+    if let Some(&scale) = SCALE.get(decimals)
+        && v.abs() < 1e9
+    {
+        let scaled = v.abs() * scale as f64;
+        let whole = scaled as u64; // below 1e13: truncation, exact
+        let fraction = scaled - whole as f64; // exact
+        // Rounding is monotone and every k + ½ below 2^52 is a float, so the rounded product
+        // lies on the same side of k + ½ as the exact one, or exactly on it: only that case is
+        // undecided here.
+        if fraction != 0.5 {
+            let n = whole + u64::from(fraction > 0.5);
+            if v.is_sign_negative() {
+                out.push(b'-');
+            }
+            push_digits(out, n / scale, 1);
+            if decimals > 0 {
+                out.push(b'.');
+                push_digits(out, n % scale, decimals);
+            }
+            return;
+        }
+    }
+    let _ = write!(out, "{v:.decimals$}");
+}
+
+/// Appends `n` in decimal, left-padded with zeros to at least `min_width` digits (at most 20):
+/// what `write!(out, "{n:0min_width$}")` writes, without the formatting machinery.
+fn push_digits(out: &mut Vec<u8>, mut n: u64, min_width: usize) {
+    let mut digits = [b'0'; 20];
+    let mut start = digits.len();
+    while let Some(i) = start.checked_sub(1)
+        && (n > 0 || digits.len() - start < min_width.max(1))
+    {
+        if let Some(d) = digits.get_mut(i) {
+            *d = b'0' + (n % 10) as u8;
+        }
+        n /= 10;
+        start = i;
+    }
+    out.extend_from_slice(digits.get(start..).unwrap_or_default());
+}
+
 /// Writes the per-tick trace as CSV: one row per ms, one column group per motor.
 pub fn write_csv(result: &RunResult, path: &Path) -> io::Result<()> {
-    let mut out = String::from("t_ms");
+    let mut out = b"t_ms".to_vec();
     let n = result.samples.first().map_or(0, |s| s.motors.len());
     for m in 1..=n {
         let _ = write!(
@@ -147,40 +200,55 @@ pub fn write_csv(result: &RunResult, path: &Path) -> io::Result<()> {
     }
     let chassis = result.samples.first().is_some_and(|s| s.chassis.is_some());
     if chassis {
-        out.push_str(",cmd_vx_m_s,cmd_vy_m_s,cmd_omega_rad_s,vx_m_s,vy_m_s,omega_rad_s,link_lost");
+        out.extend_from_slice(
+            b",cmd_vx_m_s,cmd_vy_m_s,cmd_omega_rad_s,vx_m_s,vy_m_s,omega_rad_s,link_lost",
+        );
     }
-    out.push('\n');
+    out.push(b'\n');
+    // Each motor's target as text, kept while it does not change (it rarely does).
+    let mut targets: Vec<Option<(u32, Vec<u8>)>> = vec![None; n];
     for s in &result.samples {
-        let _ = write!(out, "{}", s.t_ms);
-        for m in &s.motors {
-            let _ = write!(
-                out,
-                ",{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.2},{}",
-                m.target,
+        push_digits(&mut out, s.t_ms, 1);
+        if targets.len() < s.motors.len() {
+            targets.resize(s.motors.len(), None);
+        }
+        for (m, text) in s.motors.iter().zip(targets.iter_mut()) {
+            let bits = m.target.to_bits();
+            let text = match text {
+                Some((b, t)) if *b == bits => t,
+                _ => &mut text.insert((bits, format!(",{}", m.target).into_bytes())).1,
+            };
+            out.extend_from_slice(text);
+            for v in [
                 m.true_rpm,
-                m.measured_rpm,
+                f64::from(m.measured_rpm),
                 m.true_total_deg,
-                m.measured_total_deg,
-                m.command,
+                f64::from(m.measured_total_deg),
+                f64::from(m.command),
                 m.current_amps,
-                m.temperature_c,
-                u8::from(m.online)
-            );
+            ] {
+                out.push(b',');
+                push_fixed(&mut out, v, 4);
+            }
+            out.push(b',');
+            push_fixed(&mut out, m.temperature_c, 2);
+            out.extend_from_slice(if m.online { b",1" } else { b",0" });
         }
         if let Some(c) = s.chassis {
-            let _ = write!(
-                out,
-                ",{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{}",
+            for v in [
                 c.commanded.vx_m_s,
                 c.commanded.vy_m_s,
                 c.commanded.omega_rad_s,
                 c.achieved.vx_m_s,
                 c.achieved.vy_m_s,
                 c.achieved.omega_rad_s,
-                u8::from(c.link_lost)
-            );
+            ] {
+                out.push(b',');
+                push_fixed(&mut out, f64::from(v), 4);
+            }
+            out.extend_from_slice(if c.link_lost { b",1" } else { b",0" });
         }
-        out.push('\n');
+        out.push(b'\n');
     }
     std::fs::write(path, out)
 }
@@ -425,4 +493,120 @@ pub fn write_all(
         }
     }
     Ok(paths)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{push_digits, push_fixed};
+
+    /// Values around every edge the fast path must get right: exact ties (k/2^n), values a
+    /// hair either side of a rounding point, signed zeros, tiny negatives that round to
+    /// "-0.0000", the 1e9 limit, non-finite values, and a wide deterministic spread (f64 and
+    /// f32 values).
+    fn awkward_values() -> Vec<f64> {
+        let mut v = vec![
+            0.0,
+            -0.0,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e-300,
+            -1e-300,
+        ];
+        for base in [
+            0.0,
+            1.0,
+            9.0,
+            99.0,
+            482.0,
+            8191.0,
+            16384.0,
+            123_456.0,
+            999_999_999.0,
+            1e9,
+        ] {
+            for offset in [
+                0.0, 0.5, 0.05, 0.005, 0.0005, 0.00005, 0.25, 0.125, 0.03125, 0.99995,
+            ] {
+                for sign in [1.0, -1.0] {
+                    let x: f64 = sign * (base + offset);
+                    v.extend([x, x.next_up(), x.next_down(), f64::from(x as f32)]);
+                }
+            }
+        }
+        // Decimal near-ties: (k + ½)/10^d and its neighbours, whose scaled value often lands
+        // exactly on the half.
+        for d in [10.0, 100.0, 1e3, 1e4] {
+            for k in 0..5_000 {
+                let t = (f64::from(k) + 0.5) / d;
+                v.extend([t, t.next_up(), t.next_down(), -t]);
+            }
+        }
+        // Exact binary ties at each number of decimals: k/2^n for small n.
+        for k in 0..2048 {
+            v.extend([
+                f64::from(k) / 1024.0,
+                -f64::from(k) / 64.0,
+                f64::from(k) / 32768.0,
+            ]);
+        }
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        for _ in 0..100_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let unit = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            v.extend([
+                unit,
+                unit * 1e3,
+                unit * 2e5,
+                unit * 2e9,
+                f64::from((unit * 700.0) as f32),
+            ]);
+        }
+        v
+    }
+
+    #[test]
+    fn digits_match_the_standard_formatter() {
+        let mut fast = Vec::new();
+        for n in [
+            0,
+            1,
+            9,
+            10,
+            99,
+            100,
+            4_321,
+            10_000,
+            599_999,
+            u64::MAX - 1,
+            u64::MAX,
+        ] {
+            for width in [1, 2, 4, 20] {
+                fast.clear();
+                push_digits(&mut fast, n, width);
+                assert_eq!(fast, format!("{n:0width$}").as_bytes());
+            }
+        }
+    }
+
+    #[test]
+    fn fixed_point_text_matches_the_standard_formatter() {
+        let mut fast = Vec::new();
+        for x in awkward_values() {
+            for decimals in 0..=4 {
+                fast.clear();
+                push_fixed(&mut fast, x, decimals);
+                let expected = format!("{x:.decimals$}");
+                assert_eq!(fast, expected.as_bytes(), "{x:e} to {decimals} decimals");
+            }
+        }
+        // An f32 prints as its f64 widening does (the trace widens its f32 columns).
+        for x in [0.1f32, -2.675, 1.0e-5, 299.999_97, -0.0] {
+            fast.clear();
+            push_fixed(&mut fast, f64::from(x), 4);
+            assert_eq!(fast, format!("{x:.4}").as_bytes());
+        }
+    }
 }
