@@ -149,7 +149,7 @@ fn push_fixed(out: &mut Vec<u8>, v: f64, decimals: usize) {
         && v.abs() < 1e9
     {
         let scaled = v.abs() * scale as f64;
-        let whole = scaled as u64; // below 1e13: truncation, exact
+        let whole = scaled as u64; // at most 1e13: truncation, exact
         let fraction = scaled - whole as f64; // exact
         // Rounding is monotone and every k + ½ below 2^52 is a float, so the rounded product
         // lies on the same side of k + ½ as the exact one, or exactly on it: only that case is

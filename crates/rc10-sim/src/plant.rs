@@ -250,7 +250,9 @@ impl DjiEsc {
                     gradient_rpm_per_nm,
                     ..
                 } => {
-                    let normal = |x: f64| x.is_finite() && x >= 1e-100;
+                    // Ordinary magnitudes only, so that every intermediate of the exact
+                    // bound stays a normal float (see `inside_torque_speed_line`).
+                    let normal = |x: f64| (1e-100..=1e100).contains(&x);
                     let product = gradient_rpm_per_nm * params.torque_constant_nm_per_a;
                     (normal(gradient_rpm_per_nm)
                         && normal(params.torque_constant_nm_per_a)
@@ -271,8 +273,10 @@ impl DjiEsc {
     /// Why it never says `true` wrongly: the speed here (`ω · 60/2π`) differs from the exact
     /// one (`ω · 60 / 2π`) by a few ulps, the exact bound divides by the gradient and then by
     /// kt (two roundings), and `|i| · rpm_per_amp` rounds once: together a few parts in 1e16
-    /// of `no_load_rpm + |n|`, far inside the margin of 1e-12 of it plus 1e-9 relative. Tiny
-    /// (subnormal) headroom is left to the exact path; NaN compares false.
+    /// of `no_load_rpm + |n|`, far inside the margin of 1e-12 of it plus 1e-9 relative. That
+    /// holds while no intermediate is subnormal: the constants are within [1e-100, 1e100]
+    /// (else no shortcut) and headroom below 1e-100 rpm is left to the exact path, so the
+    /// exact path's quotients stay above 1e-300. NaN compares false.
     fn inside_torque_speed_line(&self, i: f64, no_load_rpm: f64, limit_amps: f64) -> bool {
         const RPM_PER_RAD_S: f64 = 60.0 / TAU;
         let Some(rpm_per_amp) = self.rpm_per_amp else {
@@ -286,7 +290,7 @@ impl DjiEsc {
         };
         let margin = (no_load_rpm.abs() + n.abs()) * 1e-12;
         let headroom_rpm = (toward - margin) * (1.0 - 1e-9);
-        i.abs() <= limit_amps && headroom_rpm > 1e-200 && i.abs() * rpm_per_amp < headroom_rpm
+        i.abs() <= limit_amps && headroom_rpm > 1e-100 && i.abs() * rpm_per_amp < headroom_rpm
     }
 
     /// The electrical lag's step factor for `dt_s` with time constant `tau_s`, cached.
@@ -719,6 +723,19 @@ mod tests {
         assert!(!esc.inside_torque_speed_line(0.0, 482.0, 20.0));
         let esc = DjiEsc::new(MotorParams::gm6020_voltage(), 1, Load::default(), 0);
         assert!(!esc.inside_torque_speed_line(0.0, 482.0, 20.0));
+        // Absurd constants whose exact bound goes through a subnormal quotient
+        // (1e-20 rpm / 1e300 rpm/N·m): the exact path decides.
+        let mut params = MotorParams::m3508();
+        params.torque_constant_nm_per_a = 1e-100;
+        if let Drive::CurrentLoop {
+            gradient_rpm_per_nm,
+            ..
+        } = &mut params.drive
+        {
+            *gradient_rpm_per_nm = 1e300;
+        }
+        let esc = DjiEsc::new(params, 1, Load::default(), 0);
+        assert!(!esc.inside_torque_speed_line(0.99999e-220, 1e-20, 20.0));
         let esc = DjiEsc::new(MotorParams::m3508(), 1, Load::default(), 0);
         assert!(esc.inside_torque_speed_line(0.0, 482.0, 20.0));
     }
