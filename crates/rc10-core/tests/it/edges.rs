@@ -631,3 +631,64 @@ fn wrap_signed_refuses_bad_periods_and_stays_in_range_at_the_extremes() {
         assert!((-half..half).contains(&w), "{value} -> {w}");
     }
 }
+
+#[test]
+fn low_speed_periodic_unwrapping_is_the_half_turn_rule_even_far_from_the_speed() {
+    // Documented: at low speed (every candidate of the ±2-period window moves the rotor less
+    // than a quarter turn) update_periodic is update_predicted(counts · gap), whose
+    // half-turn rule keeps the plain wrapped step while the prediction is within half a turn
+    // of it. 0 → 4692 wraps to 4692 − 8192 = −3500; the prediction (400) is 3900 < 4096
+    // away: −3500, not the +4692 a search would pick for m = 3 (1200 predicted).
+    assert_eq!(periodic_step(4692, 400.0, 1.0), -3500);
+    let mut predicted = Encoder::new(EncoderConfig::dji(GearRatio::DIRECT)).unwrap();
+    predicted.update(0).unwrap();
+    predicted.update_predicted(4692, 400.0).unwrap();
+    assert_eq!(predicted.total_counts(), -3500);
+}
+
+#[test]
+fn an_absolute_encoder_starts_at_minus_180_deg_exactly_half_a_turn_from_its_zero() {
+    // Origin::Absolute: the first reading is placed in [-180°, 180°) around the zero. Half a
+    // turn away (raw 0, zero 4096 of 8192) is the closed end: -180°, not +180°.
+    let mut config = EncoderConfig::dji(GearRatio::DIRECT);
+    config.origin = rc10_core::encoder::Origin::Absolute {
+        zero_offset_counts: 4096,
+    };
+    let mut e = Encoder::new(config).unwrap();
+    e.update(0).unwrap();
+    assert_eq!(e.total_counts(), -4096);
+    assert_eq!(e.total_angle_deg(), -180.0);
+    // Just inside the other end: raw 8191 is 4095 counts past the zero.
+    let mut e = Encoder::new(config).unwrap();
+    e.update(8191).unwrap();
+    assert_eq!(e.total_counts(), 4095);
+}
+
+#[test]
+fn an_integral_only_loop_saturates_exactly_at_the_output_limit() {
+    // kp = kd = 0 is a valid configuration. A constant error of 3 with ki·e·dt = 3 per step
+    // and a 10 limit: 3, 6, 9, then the integral reaches the limit itself (conditional
+    // integration only refuses growth that pushes the sum *beyond* the limit).
+    let mut pid = Pid::new(PidConfig::new(0.0, 1000.0, 0.0).with_output_limit(10.0)).unwrap();
+    let mut out = 0.0;
+    for _ in 0..10 {
+        out = pid.update(3.0, 0.0, 0.001).output;
+    }
+    assert_eq!(out, 10.0);
+    // The same downwards.
+    let mut pid = Pid::new(PidConfig::new(0.0, 1000.0, 0.0).with_output_limit(10.0)).unwrap();
+    for _ in 0..10 {
+        out = pid.update(-3.0, 0.0, 0.001).output;
+    }
+    assert_eq!(out, -10.0);
+}
+
+#[test]
+fn periodic_fits_exactly_256_counts_apart_are_equally_good() {
+    // Documented: fits within 256 counts of each other are equally good, and then the m
+    // nearer the measured gap wins. 600 counts/period, gap 1 (window m = 1..3), reading 5168
+    // (wrapped step −3024): m = 1 predicts 600, nearest step −3024, 3624 off; m = 2 predicts
+    // 1200, step 5168, 3968 off; m = 3 predicts 1800, step 5168, 3368 off. m = 3 fits
+    // exactly 256 better than m = 1: equally good, and m = 1 is nearer the gap.
+    assert_eq!(periodic_step(5168, 600.0, 1.0), -3024);
+}

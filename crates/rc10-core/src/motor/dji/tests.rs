@@ -266,6 +266,18 @@ fn malformed_feedback_is_rejected_and_changes_nothing() {
     let remote = CanFrame::remote(crate::can::StandardId::new(0x201).unwrap(), 8).unwrap();
     assert!(m.update_feedback(&remote, T0).is_err());
     assert_eq!(m.state().last_feedback, None);
+    // After good feedback, malformed frames change nothing the application reads.
+    m.update_feedback(&fb(0x201, 1000, 1920, 800, 40), T0)
+        .unwrap();
+    let before = m.state();
+    let later = T0 + Duration::from_millis(1);
+    assert!(m.update_feedback(&short, later).is_err());
+    assert!(
+        m.update_feedback(&fb(0x201, 9000, -500, 100, 90), later)
+            .is_err()
+    );
+    assert!(m.update_feedback(&remote, later).is_err());
+    assert_eq!(m.state(), before);
 }
 
 #[test]
