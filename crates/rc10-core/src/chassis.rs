@@ -110,7 +110,11 @@ pub enum MecanumRollers {
     /// (an "X" when the chassis is turned over). Strafing left spins front-left backwards.
     #[default]
     O,
-    /// The mirrored arrangement (rollers form an "X" from above).
+    /// The mirrored arrangement (rollers form an "X" from above). Its wheels turn the chassis
+    /// with a lever of half the wheelbase *minus* half the track, not plus: a near-square X
+    /// chassis can barely spin (huge wheel rpm per rad/s), and its odometry divides by that
+    /// small difference, so wheel-speed noise becomes large yaw-rate errors. An exactly square
+    /// one cannot spin at all: [`LinearChassis::mecanum`] returns [`ChassisError::Singular`].
     X,
 }
 
@@ -254,7 +258,8 @@ impl LinearChassis<4> {
     ///
     /// Wheel `i` at `(xᵢ, yᵢ)` with roller sign `sᵢ` has rim speed
     /// `vx − ω·yᵢ + sᵢ·(vy + ω·xᵢ)`: for O rollers `s = (−1, +1, +1, −1)`, which gives the
-    /// familiar `vx ∓ vy ∓ (a + b)·ω` with `a`, `b` half the wheelbase and track.
+    /// familiar `vx ∓ vy ∓ (a + b)·ω` with `a`, `b` half the wheelbase and track. X rollers
+    /// give `±(a − b)·ω` instead (see [`MecanumRollers::X`]).
     pub fn mecanum(config: MecanumConfig) -> Result<Self, ChassisError> {
         let a = positive(config.wheelbase_m)? / 2.0;
         let b = positive(config.track_m)? / 2.0;
@@ -673,6 +678,23 @@ mod tests {
             rm_chassis().wheel_rpm(Twist::new(f32::NAN, 0.0, 0.0)),
             [0.0; 4]
         );
+        // X rollers on a square chassis: every wheel's turning lever is a − b = 0.
+        assert_eq!(
+            LinearChassis::mecanum(
+                MecanumConfig::new(0.4, 0.4, 0.076).with_rollers(MecanumRollers::X)
+            )
+            .unwrap_err(),
+            ChassisError::Singular
+        );
+        // Nearly square (a − b = 5 mm): 1 rad/s needs a rim speed of only 5 mm/s, against
+        // (a + b) = 0.395 m/s with O rollers.
+        let x = LinearChassis::mecanum(
+            MecanumConfig::new(0.4, 0.39, 0.076).with_rollers(MecanumRollers::X),
+        )
+        .unwrap();
+        let rim_m_s =
+            x.wheel_rpm(Twist::new(0.0, 0.0, 1.0))[0].abs() / 60.0 * core::f32::consts::TAU * 0.076;
+        assert!((rim_m_s - 0.005).abs() < 1e-4, "{rim_m_s}");
     }
 
     proptest! {
