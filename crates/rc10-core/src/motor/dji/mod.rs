@@ -818,13 +818,15 @@ impl Motor for DjiMotor {
     fn state(&self) -> MotorState {
         self.state.lock(|cell| {
             let s = cell.borrow();
+            // Both angles from one (64-bit) division.
+            let angles = s.encoder.has_reading().then(|| s.encoder.angles_deg());
             MotorState {
                 online: s.liveness.is_online(),
                 mode: s.cascade.mode(),
                 target: s.cascade.target(),
                 speed_rpm: s.speed_rpm,
-                angle_deg: s.encoder.has_reading().then(|| s.encoder.angle_deg()),
-                total_angle_deg: s.encoder.has_reading().then(|| s.encoder.total_angle_deg()),
+                angle_deg: angles.map(|(single, _)| single),
+                total_angle_deg: angles.map(|(_, total)| total),
                 current_amps: s.current_amps,
                 temperature_c: s.temperature_c,
                 command: self.stored_command(),
