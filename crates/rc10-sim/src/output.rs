@@ -498,6 +498,9 @@ pub fn write_all(
 #[cfg(test)]
 mod tests {
     use super::{push_digits, push_fixed};
+    use crate::scenario::run::uniform;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+    use rand_xoshiro::rand_core::SeedableRng;
 
     /// Values around every edge the fast path must get right: exact ties (k/2^n), values a
     /// hair either side of a rounding point, signed zeros, tiny negatives that round to
@@ -550,12 +553,9 @@ mod tests {
                 f64::from(k) / 32768.0,
             ]);
         }
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
         for _ in 0..100_000 {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let unit = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            let unit = uniform(&mut rng) - 0.5;
             v.extend([
                 unit,
                 unit * 1e3,

@@ -534,6 +534,9 @@ fn encoder_counts(x: f64) -> u16 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scenario::run::uniform;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+    use rand_xoshiro::rand_core::SeedableRng;
 
     fn run_full_current(params: MotorParams, seconds: f64) -> DjiEsc {
         let mut esc = DjiEsc::new(params, 1, Load::default(), 0);
@@ -610,12 +613,9 @@ mod tests {
             }
         }
         // A deterministic spread over ±1e5 and ±1e16.
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
         for _ in 0..20_000 {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let unit = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            let unit = uniform(&mut rng) - 0.5;
             v.extend([unit * 2e5, unit * 2e16, unit * 600.0]);
         }
         v
@@ -655,13 +655,8 @@ mod tests {
 
     #[test]
     fn torque_speed_shortcut_is_taken_only_where_the_exact_clamp_returns_the_current() {
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut unit = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let mut unit = || uniform(&mut rng);
         let (mut taken, mut checked) = (0u32, 0u32);
         for params in [
             MotorParams::m3508(),

@@ -44,11 +44,9 @@ pub(super) fn target_metrics(
     let t0_s = at_ms as f64 * 1e-3;
     let mut series = Vec::with_capacity(samples.len());
     for s in samples.iter().filter(|s| s.t_ms >= at_ms) {
+        // `t_ms ≥ at_ms` already gives `t ≥ t0_s` (the same rounded scaling of both).
         if let Some(m) = pick(s) {
-            let t = s.t_ms as f64 * 1e-3;
-            if t >= t0_s {
-                series.push((t, signal(&m), m.current_amps));
-            }
+            series.push((s.t_ms as f64 * 1e-3, signal(&m), m.current_amps));
         }
     }
     Some(TargetMetrics {

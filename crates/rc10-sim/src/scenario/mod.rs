@@ -16,7 +16,7 @@ mod chassis_app;
 mod faults;
 mod metrics;
 mod observe;
-mod run;
+pub(crate) mod run;
 pub mod soak;
 
 pub use builtin::builtin;

@@ -62,7 +62,7 @@ fn apply_target(motor: &dyn SimMotor, kind: TargetKind, value: f32) -> Result<()
 }
 
 /// A uniform number in [0, 1) from the run's generator.
-fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
+pub(crate) fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
     (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
 }
 
