@@ -6,7 +6,7 @@
 //! Regions: `speed4` (one 4×M3508 speed-mode tick), `angle4` (one 4×M3508 angle-mode tick
 //! that runs the angle loop), `dispatch` (one feedback frame routed among 4 motors),
 //! `pid` (one positional PID step), `incremental` (one incremental PID step), `dt`
-//! (one `DeltaTime` update).
+//! (one `DeltaTime` update), `td` (one incremental PID step with a tracking differentiator).
 #![no_std]
 #![no_main]
 
@@ -123,6 +123,17 @@ fn main() -> ! {
     let _ = dt.update(Instant::from_micros(5_000_000_000));
     rc10_profile_begin(5);
     black_box(dt.update(black_box(Instant::from_micros(5_000_001_003))));
+    rc10_profile_end();
+
+    let mut td = IncrementalPid::new(
+        IncrementalPidConfig::new(18.0, 15.0, 0.0)
+            .with_output_limit(15.0)
+            .with_td(200.0),
+    )
+    .unwrap_or_else(|_| unreachable!());
+    let _ = td.update(300.0, 5.0, 0.001);
+    rc10_profile_begin(6);
+    black_box(td.update(black_box(300.0), black_box(7.0), black_box(0.001)));
     rc10_profile_end();
 
     debug::exit(debug::EXIT_SUCCESS);

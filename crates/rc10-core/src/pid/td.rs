@@ -29,6 +29,13 @@ const MAX_SUBSTEPS: u32 = 8;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackingDifferentiator {
     r_rad_s: f32,
+    /// The longest Euler step, `1/r` seconds (dead-beat).
+    h_max_s: f32,
+    /// Gaps longer than this (`8/r` seconds) snap to the input.
+    snap_after_s: f32,
+    /// `-r²` and `2r`, the system's coefficients.
+    neg_r_sq: f32,
+    two_r: f32,
     state: Option<(f32, f32)>,
 }
 
@@ -36,8 +43,15 @@ impl TrackingDifferentiator {
     /// A tracker with speed `r_rad_s` (rad/s, finite and positive).
     pub const fn new(r_rad_s: f32) -> Result<Self, PidConfigError> {
         if r_rad_s.is_finite() && r_rad_s > 0.0 {
+            // Everything a step needs that depends on `r` alone, computed once (the same
+            // values, bit for bit, as computing them in every step).
+            let h_max_s = 1.0 / r_rad_s;
             Ok(Self {
                 r_rad_s,
+                h_max_s,
+                snap_after_s: h_max_s * MAX_SUBSTEPS as f32,
+                neg_r_sq: -r_rad_s * r_rad_s,
+                two_r: 2.0 * r_rad_s,
                 state: None,
             })
         } else {
@@ -76,23 +90,27 @@ impl TrackingDifferentiator {
         }
         let (mut x1, mut x2) = self.state.unwrap_or((input, 0.0));
         if super::positional::dt_valid(dt_s) {
-            let r = self.r_rad_s;
-            let h_max = 1.0 / r;
-            if dt_s > h_max * MAX_SUBSTEPS as f32 {
+            let h_max = self.h_max_s;
+            if dt_s <= h_max {
+                // One step (every call at a tick period shorter than `1/r`).
+                let accel = self.neg_r_sq * (x1 - input) - self.two_r * x2;
+                x1 += dt_s * x2;
+                x2 += dt_s * accel;
+            } else if dt_s > self.snap_after_s {
                 (x1, x2) = (input, 0.0);
             } else {
                 let mut remaining = dt_s;
                 while remaining > 0.0 {
                     // By comparison: `f32::min` is a library call on the Cortex-M4.
                     let h = if remaining < h_max { remaining } else { h_max };
-                    let accel = -r * r * (x1 - input) - 2.0 * r * x2;
+                    let accel = self.neg_r_sq * (x1 - input) - self.two_r * x2;
                     x1 += h * x2;
                     x2 += h * accel;
                     remaining -= h;
                 }
             }
         }
-        if !(x1.is_finite() && x2.is_finite()) {
+        if !super::positional::all_finite(x1, x2, 0.0) {
             // An absurd (finite) input overflowed the state: start again from the input at
             // rest rather than carry infinities or NaN into every later call.
             (x1, x2) = (input, 0.0);
@@ -153,6 +171,25 @@ mod tests {
         }
         let t90 = t90.unwrap();
         assert!((t90 - 3.89 / r).abs() < 0.004, "t90 = {t90}");
+    }
+
+    #[test]
+    fn steps_of_one_over_r_are_dead_beat_whether_one_call_or_sub_steps() {
+        // Euler with h = 1/r from rest at 0 towards 1: x2 = h·r²·1 = r, x1 = 0; then
+        // x1 = h·r = 1 and x2 = r + h·(r²·1 − 2r·r) = 0: on the input, at rest, in two steps.
+        let close = |(a, b): (f32, f32), (x, y): (f32, f32)| {
+            assert!((a - x).abs() < 1e-4 && (b - y).abs() < 1e-3, "({a}, {b})");
+        };
+        let mut td = TrackingDifferentiator::new(100.0).unwrap();
+        td.reset(0.0);
+        close(td.update(1.0, 0.01), (0.0, 100.0));
+        close(td.update(1.0, 0.01), (1.0, 0.0));
+        // The same two steps as the sub-steps of one call of 2/r.
+        td.reset(0.0);
+        close(td.update(1.0, 0.02), (1.0, 0.0));
+        // Shorter calls take one step each: h = dt, x2 = dt·r² = 10 after the first.
+        td.reset(0.0);
+        close(td.update(1.0, 0.001), (0.0, 10.0));
     }
 
     #[test]
