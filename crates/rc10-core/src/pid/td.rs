@@ -187,6 +187,10 @@ mod tests {
         // The same two steps as the sub-steps of one call of 2/r.
         td.reset(0.0);
         close(td.update(1.0, 0.02), (1.0, 0.0));
+        // 1.5/r: a full step, then the remaining half: x1 = 0.005·100 = 0.5,
+        // x2 = 100 + 0.005·(10^4 − 200·100) = 50.
+        td.reset(0.0);
+        close(td.update(1.0, 0.015), (0.5, 50.0));
         // Shorter calls take one step each: h = dt, x2 = dt·r² = 10 after the first.
         td.reset(0.0);
         close(td.update(1.0, 0.001), (0.0, 10.0));
