@@ -429,7 +429,7 @@ impl Encoder {
             return self.update_predicted(raw, counts_per_period * gap);
         }
         let d0 = wrapped_step(raw, last, cpr);
-        let centre = libm::roundf(gap) as i64;
+        let centre = i64::from(round_clamped(gap));
         #[allow(
             clippy::arithmetic_side_effects,
             reason = "centre is within [1, 10^6]: gap is clamped"
@@ -536,7 +536,29 @@ fn wrapped_step(to: u16, from: u16, n: u16) -> i64 {
     reason = "step is a wrapped_step (|step| ≤ 2^15), |turns| ≤ 10^6, n < 2^16: below 2^37"
 )]
 fn plus_whole_turns(step: i64, turns: f32, n: u16) -> i64 {
-    step + libm::roundf(turns).clamp(-1.0e6, 1.0e6) as i64 * i64::from(n)
+    step + i64::from(round_clamped(turns)) * i64::from(n)
+}
+
+/// `x` clamped to ±10⁶ and rounded half away from zero, NaN to 0: the value of
+/// `roundf(x).clamp(-1e6, 1e6) as i32` without the library call (`roundf` is one on the
+/// Cortex-M4 and on x86-64's baseline).
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "|whole| ≤ 10^6: one more or less cannot overflow"
+)]
+fn round_clamped(x: f32) -> i32 {
+    let x = x.clamp(-1.0e6, 1.0e6); // comparisons; NaN stays NaN
+    let whole = x as i32; // towards zero; NaN becomes 0
+    // Exact: |x| < 2^23, so `whole` and the fraction are representable (NaN for NaN, which
+    // fails both comparisons).
+    let fraction = x - whole as f32;
+    if fraction >= 0.5 {
+        whole + 1
+    } else if fraction <= -0.5 {
+        whole - 1
+    } else {
+        whole
+    }
 }
 
 #[cfg(test)]
@@ -546,6 +568,44 @@ mod tests {
 
     fn dji(gear: GearRatio) -> Encoder {
         Encoder::new(EncoderConfig::dji(gear)).unwrap()
+    }
+
+    #[test]
+    fn rounding_by_hand_rounds_half_away_from_zero_and_clamps() {
+        // Ties go away from zero; just below a tie goes towards it (0.49999997 is where
+        // `x + 0.5` would round the wrong way); the clamp is ±10^6; NaN gives 0.
+        let cases = [
+            (0.5, 1),
+            (-0.5, -1),
+            (1.5, 2),
+            (-2.5, -3),
+            (0.499_999_97, 0),
+            (-0.499_999_97, 0),
+            (2.499_999_8, 2),
+            (0.0, 0),
+            (-0.0, 0),
+            (999_999.5, 1_000_000),
+            (3.0e9, 1_000_000),
+            (f32::NEG_INFINITY, -1_000_000),
+            (f32::NAN, 0),
+        ];
+        for (x, want) in cases {
+            assert_eq!(round_clamped(x), want, "{x}");
+        }
+        // And libm's `roundf` agrees on values spread over every magnitude and ties.
+        let mut bits = 0x1234_5678u32;
+        for k in 0..200_000u32 {
+            bits ^= bits << 13;
+            bits ^= bits >> 17;
+            bits ^= bits << 5;
+            let x = if k % 2 == 0 {
+                f32::from_bits(bits)
+            } else {
+                (bits % 4_000_000) as f32 * 0.25 - 500_000.0 // many exact halves
+            };
+            let want = libm::roundf(x).clamp(-1.0e6, 1.0e6) as i32;
+            assert_eq!(round_clamped(x), want, "{x}");
+        }
     }
 
     #[test]
