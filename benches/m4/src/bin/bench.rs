@@ -200,8 +200,8 @@ fn main() -> ! {
     k = 2_000_000;
     dispatch_samples(&mut k, &mut s);
     f.row("dispatch_4_after_1e6", &mut s, Stat::Median);
-    // At full speed (above a sixteenth of a turn per period) the encoder checks five
-    // candidate frame gaps instead of trusting one prediction: the costliest parse.
+    // At full speed (above a sixteenth of a turn per period) the encoder weighs up to five
+    // candidate frame gaps (three here: frames on time) instead of trusting one prediction.
     for slot in s.iter_mut() {
         let angle = ((u64::from(k) * 1264) % 8192) as u16;
         let a = angle.to_be_bytes();
