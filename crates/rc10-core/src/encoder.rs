@@ -540,25 +540,10 @@ fn plus_whole_turns(step: i64, turns: f32, n: u16) -> i64 {
 }
 
 /// `x` clamped to ±10⁶ and rounded half away from zero, NaN to 0: the value of
-/// `roundf(x).clamp(-1e6, 1e6) as i32` without the library call (`roundf` is one on the
-/// Cortex-M4 and on x86-64's baseline).
-#[allow(
-    clippy::arithmetic_side_effects,
-    reason = "|whole| ≤ 10^6: one more or less cannot overflow"
-)]
+/// `roundf(x).clamp(-1e6, 1e6) as i32` without the library call.
 fn round_clamped(x: f32) -> i32 {
-    let x = x.clamp(-1.0e6, 1.0e6); // comparisons; NaN stays NaN
-    let whole = x as i32; // towards zero; NaN becomes 0
-    // Exact: |x| < 2^23, so `whole` and the fraction are representable (NaN for NaN, which
-    // fails both comparisons).
-    let fraction = x - whole as f32;
-    if fraction >= 0.5 {
-        whole + 1
-    } else if fraction <= -0.5 {
-        whole - 1
-    } else {
-        whole
-    }
+    // Comparisons; NaN stays NaN (and then becomes 0).
+    crate::math::round_small_i32(x.clamp(-1.0e6, 1.0e6))
 }
 
 #[cfg(test)]

@@ -144,8 +144,9 @@ impl VescCommand {
             Self::Erpm(e) => (packet::SET_RPM, e),
             Self::Position(deg) => (packet::SET_POS, deg * 1_000_000.0),
         };
-        // `as` saturates at the i32 range and maps NaN to 0: no wrap, no sign flip.
-        let raw = libm::roundf(value) as i32;
+        // Rounded half away from zero, saturating at the i32 range, NaN to 0: no wrap, no
+        // sign flip (and no `roundf` library call every tick).
+        let raw = crate::math::round_i32(value);
         CanFrame::extended(
             (u32::from(packet) << 8) | u32::from(vesc_id),
             &raw.to_be_bytes(),
@@ -633,6 +634,21 @@ mod tests {
         assert_eq!(packed(&m), (0x0142, vec![0x00, 0x00, 0x30, 0xD4]));
         m.set_target_current(-1.0).unwrap();
         assert_eq!(packed(&m).1, vec![0xFF, 0xFF, 0xFC, 0x18]); // -1000
+    }
+
+    #[test]
+    fn command_values_round_half_away_from_zero_and_saturate_on_the_wire() {
+        // SET_RPM (3) to controller 9 carries eRPM as it is: 2.5 → 3, −2.5 → −3, 2.4999998
+        // → 2; beyond the i32 range the value saturates (no wrap, no sign flip).
+        let wire = |erpm: f32| VescCommand::Erpm(erpm).to_frame(9).unwrap().data().to_vec();
+        assert_eq!(wire(2.5), 3i32.to_be_bytes());
+        assert_eq!(wire(-2.5), (-3i32).to_be_bytes());
+        assert_eq!(wire(2.499_999_8), 2i32.to_be_bytes());
+        assert_eq!(wire(3.0e9), [0x7F, 0xFF, 0xFF, 0xFF]);
+        assert_eq!(wire(-3.0e9), [0x80, 0x00, 0x00, 0x00]);
+        // SET_POS (4): 359.9999 deg × 10^6 is far above 2^23, a whole float already.
+        let pos = VescCommand::Position(359.999_9).to_frame(9).unwrap();
+        assert_eq!(pos.data(), 359_999_904i32.to_be_bytes());
     }
 
     #[test]

@@ -582,11 +582,9 @@ impl DjiMotor {
         } else {
             raw
         };
-        // Rounded half away from zero by hand (`roundf` is a library call on the Cortex-M4),
-        // then converted through i32, a single saturating instruction that maps NaN to 0:
-        // |raw| ≤ 30000.5, so the i16 it narrows to is exact.
-        let half = if raw < 0.0 { -0.5 } else { 0.5 };
-        (raw + half) as i32 as i16
+        // Rounded half away from zero without the `roundf` library call (NaN becomes 0):
+        // |raw| ≤ 32767, so the rounding is exact and so is the i16 it narrows to.
+        crate::math::round_small_i32(raw) as i16
     }
 
     fn store_command(&self, command: f32) {
