@@ -229,16 +229,23 @@ impl Cascade {
     /// zero) and, in closed-loop modes, within the speed loop's own output limit. In current /
     /// voltage / torque mode the target is passed through, clamped.
     pub fn step(&mut self, m: &Measured, dt_s: f32, limit: f32) -> f32 {
-        let limit = if limit > 0.0 { limit } else { 0.0 };
+        // `target` and `feed_forward` are finite (their setters refuse anything else) and so
+        // is the angle loop's output: the loops check only the measurement.
         self.output = match self.mode {
             ControlMode::Disabled => 0.0,
             ControlMode::Current | ControlMode::Voltage | ControlMode::Torque => {
-                saturate(self.target, limit)
+                // A NaN or negative limit counts as zero (the loops below do the same).
+                saturate(self.target, if limit > 0.0 { limit } else { 0.0 })
             }
             ControlMode::Speed => {
                 self.speed_target_rpm = self.target;
-                self.speed
-                    .output_within(self.target, m.speed_rpm, self.feed_forward, dt_s, limit)
+                self.speed.output_within_finite_target(
+                    self.target,
+                    m.speed_rpm,
+                    self.feed_forward,
+                    dt_s,
+                    limit,
+                )
             }
             ControlMode::Angle | ControlMode::TotalAngle => {
                 self.angle_dt_s += dt_s;
@@ -250,7 +257,7 @@ impl Cascade {
                     } else {
                         m.total_angle_deg
                     };
-                    self.speed_target_rpm = self.angle.output_within(
+                    self.speed_target_rpm = self.angle.output_within_finite_target(
                         self.target,
                         measured,
                         0.0,
@@ -260,7 +267,7 @@ impl Cascade {
                     self.ticks_since_angle = 0;
                     self.angle_dt_s = 0.0;
                 }
-                self.speed.output_within(
+                self.speed.output_within_finite_target(
                     self.speed_target_rpm,
                     m.speed_rpm,
                     self.feed_forward,

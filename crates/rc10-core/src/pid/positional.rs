@@ -160,9 +160,21 @@ pub struct Pid {
     output_cap: f32,
     /// `integral_limit`, at most `f32::MAX` (derived from the configuration).
     integral_cap: f32,
-    /// No deadband, no integral separation, no D filter (derived from the configuration):
-    /// the step takes the short path.
-    plain: bool,
+    /// Which step the configuration takes (derived from it).
+    path: Path,
+}
+
+/// The step a configuration takes, decided once when it is set so that a step tests one
+/// value instead of each part of the configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Path {
+    /// Deadband, integral separation or a D filter: the general step.
+    General,
+    /// None of those: the general step with those parts known to do nothing.
+    Plain,
+    /// Plain, and also a linear error, `kd = 0` and `ki ≠ 0` (the usual speed loop): the plain
+    /// step with those known too.
+    PlainPi,
 }
 
 /// Whether all three are finite, in a few instructions: `x · 0` is zero for finite `x` and
@@ -203,11 +215,17 @@ const fn cap(limit: f32) -> f32 {
     if limit < f32::MAX { limit } else { f32::MAX }
 }
 
-/// Whether a (valid) configuration has no deadband, no integral separation and no D filter.
-const fn is_plain(config: &PidConfig) -> bool {
-    config.deadband == 0.0
+/// The step a (valid) configuration takes.
+const fn path_of(config: &PidConfig) -> Path {
+    let plain = config.deadband == 0.0
         && config.integral_separation == f32::INFINITY
-        && LowPass::new(config.d_cutoff_hz).tau_s() == 0.0
+        && LowPass::new(config.d_cutoff_hz).tau_s() == 0.0;
+    let pi = matches!(config.error_mode, ErrorMode::Linear) && config.kd == 0.0 && config.ki != 0.0;
+    match (plain, pi) {
+        (false, _) => Path::General,
+        (true, false) => Path::Plain,
+        (true, true) => Path::PlainPi,
+    }
 }
 
 impl Pid {
@@ -223,7 +241,7 @@ impl Pid {
                 last: PidTerms::ZERO,
                 output_cap: cap(config.output_limit),
                 integral_cap: cap(config.integral_limit),
-                plain: is_plain(&config),
+                path: path_of(&config),
             }),
             Err(e) => Err(e),
         }
@@ -248,7 +266,7 @@ impl Pid {
         self.config = config;
         self.output_cap = cap(config.output_limit);
         self.integral_cap = cap(config.integral_limit);
-        self.plain = is_plain(&config);
+        self.path = path_of(&config);
         self.integral = saturate(self.integral, config.integral_limit);
         Ok(())
     }
@@ -319,6 +337,24 @@ impl Pid {
         self.step_finite(target, measurement, feed_forward, dt_s, limit)
     }
 
+    /// [`output_within`](Self::output_within) for a caller that keeps `target` and
+    /// `feed_forward` finite itself (the cascade, whose setters refuse anything else): only
+    /// `measurement` is checked (a non-finite one returns `0.0` and changes nothing).
+    #[inline(always)]
+    pub(crate) fn output_within_finite_target(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+    ) -> f32 {
+        if !measurement.is_finite() {
+            return 0.0;
+        }
+        self.step_finite(target, measurement, feed_forward, dt_s, limit)
+    }
+
     /// One step for finite `target`, `measurement` and `feed_forward`: updates the state and
     /// `last`, returns the output.
     ///
@@ -341,10 +377,12 @@ impl Pid {
         dt_s: f32,
         limit: f32,
     ) -> f32 {
-        if self.plain {
-            self.step_plain(target, measurement, feed_forward, dt_s, limit)
-        } else {
-            self.step_general(target, measurement, feed_forward, dt_s, limit)
+        match self.path {
+            Path::PlainPi => {
+                self.step_plain::<true>(target, measurement, feed_forward, dt_s, limit)
+            }
+            Path::Plain => self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit),
+            Path::General => self.step_general(target, measurement, feed_forward, dt_s, limit),
         }
     }
 
@@ -387,9 +425,10 @@ impl Pid {
 
     /// [`step_finite`](Self::step_finite) for a configuration without deadband, integral
     /// separation or D filter: the error is always in band, `|e| ≤ 0` only for `±0` (which
-    /// the deadband turns into `+0`, as `e + 0.0` does), and D passes unfiltered.
+    /// the deadband turns into `+0`, as `e + 0.0` does), and D passes unfiltered. With `PI`
+    /// ([`Path::PlainPi`]) the error is also linear, D is 0 and I runs.
     #[inline(always)]
-    fn step_plain(
+    fn step_plain<const PI: bool>(
         &mut self,
         target: f32,
         measurement: f32,
@@ -399,15 +438,20 @@ impl Pid {
     ) -> f32 {
         let (out_limit, i_limit) = self.limits(feed_forward, limit);
         let c = &self.config;
-        let error = finite(c.error_mode.diff(target, measurement)) + 0.0;
+        let difference = if PI {
+            target - measurement
+        } else {
+            c.error_mode.diff(target, measurement)
+        };
+        let error = finite(difference) + 0.0;
         let dt_ok = dt_valid(dt_s);
         let p = finite(c.kp * error);
-        let d = if c.kd == 0.0 {
+        let d = if PI || c.kd == 0.0 {
             0.0
         } else {
             self.plain_derivative(measurement, dt_s, dt_ok)
         };
-        let integral = if dt_ok && self.config.ki != 0.0 {
+        let integral = if dt_ok && (PI || self.config.ki != 0.0) {
             let prev_error = match self.prev_error {
                 Some(e) => e,
                 None => error,
@@ -855,17 +899,18 @@ mod tests {
                 .with_integral_limit(i_limit)
                 .with_error_mode(mode);
             let mut plain = pid(config);
-            prop_assert!(plain.plain);
+            let pi = !circular && kd == 0.0 && ki != 0.0;
+            prop_assert_eq!(plain.path, if pi { Path::PlainPi } else { Path::Plain });
             let mut general = plain;
-            general.plain = false;
+            general.path = Path::General;
             for (target, meas, ff, dt, limit) in steps {
                 let a = plain.update_within(target, meas, ff, dt, limit);
                 let b = general.update_within(target, meas, ff, dt, limit);
                 let bits = |t: PidTerms| [t.p, t.i, t.d, t.ff, t.output].map(f32::to_bits);
                 prop_assert_eq!(bits(a), bits(b));
-                general.plain = true;
+                general.path = plain.path;
                 prop_assert_eq!(plain, general);
-                general.plain = false;
+                general.path = Path::General;
             }
         }
 
