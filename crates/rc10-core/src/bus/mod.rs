@@ -514,9 +514,14 @@ impl<'a, const N: usize> Bus<'a, N> {
         &self.stats
     }
 
-    /// Rates over the last complete [`BusConfig::rate_window`].
+    /// Rates over the last complete [`BusConfig::rate_window`] (zero before one has
+    /// completed). Computed here, in the caller's task, from the counts the tick latched.
     pub fn rates(&self) -> BusRates {
-        self.window.lock(|w| w.borrow().latched())
+        // Copied out under the lock, computed after it.
+        match self.window.lock(|w| w.borrow().latched()) {
+            Some((elapsed, counts)) => counts.rates(elapsed, self.config.bitrate_bps),
+            None => BusRates::default(),
+        }
     }
 
     /// One scheduler tick at `now`, `dt_s` seconds after the previous: update every node, then
@@ -539,12 +544,8 @@ impl<'a, const N: usize> Bus<'a, N> {
         }
         self.stats.record_tick();
         self.window.lock(|w| {
-            w.borrow_mut().update(
-                now,
-                || self.stats.snapshot(),
-                self.config.rate_window,
-                self.config.bitrate_bps,
-            )
+            w.borrow_mut()
+                .update(now, || self.stats.snapshot(), self.config.rate_window)
         });
     }
 

@@ -187,6 +187,26 @@ pub struct BusCounters {
 }
 
 impl BusCounters {
+    /// All counts zero (the `const` twin of `Default`).
+    pub const ZERO: Self = Self {
+        rx_frames: 0,
+        rx_bits: 0,
+        rx_unmatched: 0,
+        rx_rejected: 0,
+        rx_overruns: 0,
+        bus_errors: 0,
+        tx_frames: 0,
+        tx_bits: 0,
+        tx_full: 0,
+        tx_stale: 0,
+        tx_bus_off: 0,
+        tx_batch_overflow: 0,
+        tx_undeclared: 0,
+        bus_off_events: 0,
+        ticks: 0,
+        ticks_skipped: 0,
+    };
+
     /// Frames that should have gone out but did not (TX full, bus-off, batch overflow).
     pub const fn tx_dropped(&self) -> u32 {
         self.tx_full
@@ -250,50 +270,81 @@ pub struct BusRates {
     pub load_percent: f32,
 }
 
-/// Latches [`BusRates`] once per window from successive snapshots (owned by the tick).
+/// Latches the counts of each complete window from successive snapshots (owned by the tick).
+/// The rates are computed from them when read ([`Bus::rates`](crate::bus::Bus::rates)): the
+/// tick that closes a window only copies the counters into a free slot (no subtraction,
+/// 64-bit division, float conversion or divide on the 1 kHz path).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct RateWindow {
-    start: Option<(Instant, BusCounters)>,
-    latched: BusRates,
+    /// Counter snapshots: the present window's start and the last complete window's two ends
+    /// are among them (three slots: a new window can start while the last one is kept).
+    snapshots: [BusCounters; 3],
+    /// When the present window started, and the slot of its snapshot.
+    start: Option<(Instant, u8)>,
+    /// The last complete window: its length and the slots of its first and last snapshot.
+    last: Option<(Duration, u8, u8)>,
 }
 
 impl RateWindow {
     pub(crate) const fn new() -> Self {
         Self {
+            snapshots: [BusCounters::ZERO; 3],
             start: None,
-            latched: BusRates {
-                rx_frames_per_s: 0.0,
-                tx_frames_per_s: 0.0,
-                tx_dropped_per_s: 0.0,
-                load_percent: 0.0,
-            },
+            last: None,
         }
     }
 
-    pub(crate) fn latched(&self) -> BusRates {
-        self.latched
+    /// The last complete window's length and the counts within it, if one has completed.
+    pub(crate) fn latched(&self) -> Option<(Duration, BusCounters)> {
+        let (elapsed, first, last) = self.last?;
+        let first = self.snapshots.get(usize::from(first))?;
+        let last = self.snapshots.get(usize::from(last))?;
+        Some((elapsed, last.since(first)))
     }
 
-    /// Latches new rates if a window has passed since the last latch. `counters` is only
+    /// Takes a snapshot into a slot other than `keep`'s and returns the slot.
+    fn snapshot_into_free_slot(
+        &mut self,
+        keep: [Option<u8>; 2],
+        counters: impl FnOnce() -> BusCounters,
+    ) -> u8 {
+        // Three slots, at most two kept: there is always a free one.
+        let free = [0u8, 1, 2]
+            .into_iter()
+            .find(|i| !keep.contains(&Some(*i)))
+            .unwrap_or(0);
+        if let Some(slot) = self.snapshots.get_mut(usize::from(free)) {
+            *slot = counters();
+        }
+        free
+    }
+
+    /// Latches the window if a window has passed since the last latch. `counters` is only
     /// called then (once per window, not every tick).
     pub(crate) fn update(
         &mut self,
         now: Instant,
         counters: impl FnOnce() -> BusCounters,
         window: Duration,
-        bitrate_bps: u32,
     ) {
-        if let Some((t0, c0)) = self.start
+        if let Some((t0, first)) = self.start
             && let Some(elapsed) = now.checked_duration_since(t0)
         {
             if elapsed >= window {
-                let c = counters();
-                self.latched = c.since(&c0).rates(elapsed, bitrate_bps);
-                self.start = Some((now, c));
+                // The window ends here and the next one starts from the same snapshot.
+                let end = self.snapshot_into_free_slot([Some(first), None], counters);
+                self.last = Some((elapsed, first, end));
+                self.start = Some((now, end));
             }
         } else {
-            // The first tick, or time went backwards: a new window starts.
-            self.start = Some((now, counters()));
+            // The first tick, or time went backwards: a new window starts (the last complete
+            // one stays latched).
+            let keep = match self.last {
+                Some((_, first, last)) => [Some(first), Some(last)],
+                None => [None, None],
+            };
+            let first = self.snapshot_into_free_slot(keep, counters);
+            self.start = Some((now, first));
         }
     }
 }
@@ -345,6 +396,54 @@ mod tests {
     }
 
     #[test]
+    fn each_window_latches_its_own_counts_across_slot_reuse_and_a_clock_step_back() {
+        let stats = BusStats::new();
+        let mut w = RateWindow::new();
+        let second = Duration::from_secs(1);
+        let frames_in = |w: &RateWindow| w.latched().map(|(_, c)| c.tx_frames);
+        // Windows of 500, 300, 700, 100 frames: every slot is reused at least once.
+        let mut t_ms = 0;
+        w.update(Instant::from_millis(t_ms), || stats.snapshot(), second);
+        for n in [500, 300, 700, 100] {
+            for _ in 0..n {
+                stats.record_tx(100);
+            }
+            t_ms += 1000;
+            w.update(Instant::from_millis(t_ms), || stats.snapshot(), second);
+            assert_eq!(frames_in(&w), Some(n));
+        }
+        // The clock steps back: a new window starts, the last complete one (100) stays, and
+        // the next window counts only what came after the step.
+        for _ in 0..40 {
+            stats.record_tx(100);
+        }
+        w.update(Instant::from_millis(1500), || stats.snapshot(), second);
+        assert_eq!(frames_in(&w), Some(100));
+        for _ in 0..60 {
+            stats.record_tx(100);
+        }
+        w.update(Instant::from_millis(2000), || stats.snapshot(), second);
+        assert_eq!(frames_in(&w), Some(100));
+        w.update(Instant::from_millis(2600), || stats.snapshot(), second);
+        assert_eq!(
+            w.latched(),
+            Some((
+                Duration::from_millis(1100),
+                BusCounters {
+                    tx_frames: 60,
+                    tx_bits: 6000,
+                    ..BusCounters::ZERO
+                }
+            ))
+        );
+        for _ in 0..250 {
+            stats.record_tx(100);
+        }
+        w.update(Instant::from_millis(3600), || stats.snapshot(), second);
+        assert_eq!(frames_in(&w), Some(250));
+    }
+
+    #[test]
     fn window_latches_after_one_period_and_snapshots_only_then() {
         let stats = BusStats::new();
         let mut w = RateWindow::new();
@@ -354,16 +453,23 @@ mod tests {
             snapshots.set(snapshots.get() + 1);
             stats.snapshot()
         };
-        w.update(Instant::from_micros(0), snap, second, 1_000_000);
+        w.update(Instant::from_micros(0), snap, second);
         for _ in 0..500 {
             stats.record_tx(100);
         }
-        w.update(Instant::from_millis(500), snap, second, 1_000_000);
-        assert_eq!(w.latched().tx_frames_per_s, 0.0); // window not complete
+        w.update(Instant::from_millis(500), snap, second);
+        assert_eq!(w.latched(), None); // window not complete
         assert_eq!(snapshots.get(), 1); // no snapshot mid-window
-        w.update(Instant::from_millis(1000), snap, second, 1_000_000);
-        assert_eq!(w.latched().tx_frames_per_s, 500.0);
-        assert!((w.latched().load_percent - 5.0).abs() < 1e-4);
+        w.update(Instant::from_millis(1000), snap, second);
+        let (elapsed, counts) = w.latched().unwrap();
+        assert_eq!(elapsed, second);
+        let rates = counts.rates(elapsed, 1_000_000);
+        assert_eq!(rates.tx_frames_per_s, 500.0);
+        assert!((rates.load_percent - 5.0).abs() < 1e-4);
         assert_eq!(snapshots.get(), 2);
+        // Time going backwards starts a new window and keeps the last complete one.
+        w.update(Instant::from_millis(400), snap, second);
+        assert_eq!(w.latched(), Some((elapsed, counts)));
+        assert_eq!(snapshots.get(), 3);
     }
 }
