@@ -543,7 +543,7 @@ fn plus_whole_turns(step: i64, turns: f32, n: u16) -> i64 {
 /// `roundf(x).clamp(-1e6, 1e6) as i32` without the library call.
 fn round_clamped(x: f32) -> i32 {
     // Comparisons; NaN stays NaN (and then becomes 0).
-    crate::math::round_small_i32(x.clamp(-1.0e6, 1.0e6))
+    crate::math::round_i32(x.clamp(-1.0e6, 1.0e6))
 }
 
 #[cfg(test)]

@@ -401,7 +401,8 @@ mod tests {
         let mut w = RateWindow::new();
         let second = Duration::from_secs(1);
         let frames_in = |w: &RateWindow| w.latched().map(|(_, c)| c.tx_frames);
-        // Windows of 500, 300, 700, 100 frames: every slot is reused at least once.
+        // Windows of 500, 300, 700, 100 frames: slots 0 and 1 take turns, each reused; the
+        // step back below brings slot 2 in (it must not overwrite the kept window's two).
         let mut t_ms = 0;
         w.update(Instant::from_millis(t_ms), || stats.snapshot(), second);
         for n in [500, 300, 700, 100] {

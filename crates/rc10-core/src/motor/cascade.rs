@@ -303,6 +303,22 @@ mod tests {
     }
 
     #[test]
+    fn open_loop_modes_take_a_nan_or_negative_limit_as_zero() {
+        // `saturate` alone would read a NaN limit as "no limit" and a negative one by its
+        // magnitude: the limit in force must never let a command through that way.
+        let mut c = cascade();
+        c.set_target(ControlMode::Current, 5.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 5.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, f32::NAN), 0.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, -10.0), 0.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 2.0), 2.0);
+        // The speed loop applies the same rule.
+        c.set_target(ControlMode::Speed, 100.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, f32::NAN), 0.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, -10.0), 0.0);
+    }
+
+    #[test]
     fn switch_from_current_to_speed_is_bumpless() {
         let mut c = cascade();
         c.set_target(ControlMode::Current, 5.0);

@@ -364,10 +364,10 @@ impl Pid {
     /// `ki ≠ 0`, `dt > 0` and the two errors are finite) and is clamped, and a sum of finite
     /// terms with at most one infinite partial sum is never NaN.
     ///
-    /// The configuration is looked at once: without a deadband, integral separation or D
-    /// filter (the usual speed and angle loops, flagged in `plain` when the configuration is
-    /// set) the step is the general one with those parts known to do nothing, so they are
-    /// not computed at all.
+    /// The configuration is looked at once, when it is set ([`Path`]): without a deadband,
+    /// integral separation or D filter (the usual speed and angle loops) the step is the
+    /// general one with those parts known to do nothing, so they are not computed at all;
+    /// a linear PI loop (the usual speed loop) also skips the D term and the error mode.
     #[inline(always)]
     fn step_finite(
         &mut self,

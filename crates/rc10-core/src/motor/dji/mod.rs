@@ -584,7 +584,7 @@ impl DjiMotor {
         };
         // Rounded half away from zero without the `roundf` library call (NaN becomes 0):
         // |raw| ≤ 32767, so the rounding is exact and so is the i16 it narrows to.
-        crate::math::round_small_i32(raw) as i16
+        crate::math::round_i32(raw) as i16
     }
 
     fn store_command(&self, command: f32) {

@@ -86,6 +86,23 @@ fn command_to_raw_saturates_for_every_model() {
 }
 
 #[test]
+fn command_just_below_half_a_count_rounds_to_zero_as_roundf_does() {
+    // C610: 10 000 counts per 10 A, 1000 per amp. A command whose raw value is the float
+    // just below 0.5 (0.49999997) is less than half a count: 0, not 1 (adding 0.5 and
+    // truncating would give 1); exactly 0.5 count is a tie and goes away from zero.
+    let c610 = DjiMotor::m2006(1).unwrap();
+    let below_half = 0.499_999_97f32;
+    let amps = (0..10_000u32)
+        .map(|k| f32::from_bits((below_half / 1000.0).to_bits() - 5_000 + k))
+        .find(|a| a * 1000.0 == below_half)
+        .expect("a command of 0.49999997 counts");
+    assert_eq!(c610.command_to_raw(amps), 0);
+    assert_eq!(c610.command_to_raw(-amps), 0);
+    assert_eq!(c610.command_to_raw(0.0005), 1);
+    assert_eq!(c610.command_to_raw(-0.0005), -1);
+}
+
+#[test]
 fn m2006_2_5a_id3_packs_2500_in_slot_2() {
     let m = DjiMotor::m2006(3).unwrap();
     online(&m);
