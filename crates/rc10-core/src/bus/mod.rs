@@ -545,7 +545,7 @@ impl<'a, const N: usize> Bus<'a, N> {
         self.stats.record_tick();
         self.window.lock(|w| {
             w.borrow_mut()
-                .update(now, || self.stats.snapshot(), self.config.rate_window)
+                .update(now, &self.stats, self.config.rate_window)
         });
     }
 

@@ -144,6 +144,21 @@ impl BusStats {
     }
 }
 
+impl BusStats {
+    /// The counters [`BusRates`] are computed from, written into `out` (what the tick copies
+    /// once per statistics window: five values, straight from the atomics).
+    fn rate_counts_into(&self, out: &mut RateCounts) {
+        let l = |a: &AtomicU32| a.load(Ordering::Relaxed);
+        out.rx_frames = l(&self.rx_frames);
+        out.rx_bits = l(&self.rx_bits);
+        out.tx_frames = l(&self.tx_frames);
+        out.tx_bits = l(&self.tx_bits);
+        out.tx_dropped = l(&self.tx_full)
+            .wrapping_add(l(&self.tx_bus_off))
+            .wrapping_add(l(&self.tx_batch_overflow));
+    }
+}
+
 /// A copy of a bus's counters at one moment (all cumulative since start, wrapping at 2^32).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -270,15 +285,50 @@ pub struct BusRates {
     pub load_percent: f32,
 }
 
+/// The counters [`BusRates`] are computed from (cumulative, wrapping like [`BusCounters`]);
+/// `tx_dropped` is [`BusCounters::tx_dropped`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct RateCounts {
+    rx_frames: u32,
+    rx_bits: u32,
+    tx_frames: u32,
+    tx_bits: u32,
+    tx_dropped: u32,
+}
+
+impl RateCounts {
+    const ZERO: Self = Self {
+        rx_frames: 0,
+        rx_bits: 0,
+        tx_frames: 0,
+        tx_bits: 0,
+        tx_dropped: 0,
+    };
+
+    /// The counts between `earlier` and `self`, as [`BusCounters`] (the counters that
+    /// [`BusCounters::rates`] does not read are zero).
+    const fn since(&self, earlier: &Self) -> BusCounters {
+        BusCounters {
+            rx_frames: self.rx_frames.wrapping_sub(earlier.rx_frames),
+            rx_bits: self.rx_bits.wrapping_sub(earlier.rx_bits),
+            tx_frames: self.tx_frames.wrapping_sub(earlier.tx_frames),
+            tx_bits: self.tx_bits.wrapping_sub(earlier.tx_bits),
+            // `tx_dropped()` of the result: all of it counted as `tx_full`.
+            tx_full: self.tx_dropped.wrapping_sub(earlier.tx_dropped),
+            ..BusCounters::ZERO
+        }
+    }
+}
+
 /// Latches the counts of each complete window from successive snapshots (owned by the tick).
 /// The rates are computed from them when read ([`Bus::rates`](crate::bus::Bus::rates)): the
-/// tick that closes a window only copies the counters into a free slot (no subtraction,
+/// tick that closes a window only copies five counters into a free slot (no subtraction,
 /// 64-bit division, float conversion or divide on the 1 kHz path).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct RateWindow {
     /// Counter snapshots: the present window's start and the last complete window's two ends
     /// are among them (three slots: a new window can start while the last one is kept).
-    snapshots: [BusCounters; 3],
+    snapshots: [RateCounts; 3],
     /// When the present window started, and the slot of its snapshot.
     start: Option<(Instant, u8)>,
     /// The last complete window: its length and the slots of its first and last snapshot.
@@ -288,13 +338,14 @@ pub(crate) struct RateWindow {
 impl RateWindow {
     pub(crate) const fn new() -> Self {
         Self {
-            snapshots: [BusCounters::ZERO; 3],
+            snapshots: [RateCounts::ZERO; 3],
             start: None,
             last: None,
         }
     }
 
-    /// The last complete window's length and the counts within it, if one has completed.
+    /// The last complete window's length and the counts within it (those that
+    /// [`BusCounters::rates`] reads), if one has completed.
     pub(crate) fn latched(&self) -> Option<(Duration, BusCounters)> {
         let (elapsed, first, last) = self.last?;
         let first = self.snapshots.get(usize::from(first))?;
@@ -302,37 +353,32 @@ impl RateWindow {
         Some((elapsed, last.since(first)))
     }
 
-    /// Takes a snapshot into a slot other than `keep`'s and returns the slot.
-    fn snapshot_into_free_slot(
-        &mut self,
-        keep: [Option<u8>; 2],
-        counters: impl FnOnce() -> BusCounters,
-    ) -> u8 {
+    /// Takes a snapshot of `stats` into a slot other than `keep`'s and returns the slot.
+    /// Out of line: it runs once per window, and inlined into the tick it would cost every
+    /// tick registers.
+    #[cold]
+    #[inline(never)]
+    fn snapshot_into_free_slot(&mut self, keep: [Option<u8>; 2], stats: &BusStats) -> u8 {
         // Three slots, at most two kept: there is always a free one.
         let free = [0u8, 1, 2]
             .into_iter()
             .find(|i| !keep.contains(&Some(*i)))
             .unwrap_or(0);
         if let Some(slot) = self.snapshots.get_mut(usize::from(free)) {
-            *slot = counters();
+            stats.rate_counts_into(slot);
         }
         free
     }
 
-    /// Latches the window if a window has passed since the last latch. `counters` is only
-    /// called then (once per window, not every tick).
-    pub(crate) fn update(
-        &mut self,
-        now: Instant,
-        counters: impl FnOnce() -> BusCounters,
-        window: Duration,
-    ) {
+    /// Latches the window if a window has passed since the last latch. `stats` is only read
+    /// then (once per window, not every tick).
+    pub(crate) fn update(&mut self, now: Instant, stats: &BusStats, window: Duration) {
         if let Some((t0, first)) = self.start
             && let Some(elapsed) = now.checked_duration_since(t0)
         {
             if elapsed >= window {
                 // The window ends here and the next one starts from the same snapshot.
-                let end = self.snapshot_into_free_slot([Some(first), None], counters);
+                let end = self.snapshot_into_free_slot([Some(first), None], stats);
                 self.last = Some((elapsed, first, end));
                 self.start = Some((now, end));
             }
@@ -343,7 +389,7 @@ impl RateWindow {
                 Some((_, first, last)) => [Some(first), Some(last)],
                 None => [None, None],
             };
-            let first = self.snapshot_into_free_slot(keep, counters);
+            let first = self.snapshot_into_free_slot(keep, stats);
             self.start = Some((now, first));
         }
     }
@@ -404,13 +450,13 @@ mod tests {
         // Windows of 500, 300, 700, 100 frames: slots 0 and 1 take turns, each reused; the
         // step back below brings slot 2 in (it must not overwrite the kept window's two).
         let mut t_ms = 0;
-        w.update(Instant::from_millis(t_ms), || stats.snapshot(), second);
+        w.update(Instant::from_millis(t_ms), &stats, second);
         for n in [500, 300, 700, 100] {
             for _ in 0..n {
                 stats.record_tx(100);
             }
             t_ms += 1000;
-            w.update(Instant::from_millis(t_ms), || stats.snapshot(), second);
+            w.update(Instant::from_millis(t_ms), &stats, second);
             assert_eq!(frames_in(&w), Some(n));
         }
         // The clock steps back: a new window starts, the last complete one (100) stays, and
@@ -418,14 +464,14 @@ mod tests {
         for _ in 0..40 {
             stats.record_tx(100);
         }
-        w.update(Instant::from_millis(1500), || stats.snapshot(), second);
+        w.update(Instant::from_millis(1500), &stats, second);
         assert_eq!(frames_in(&w), Some(100));
         for _ in 0..60 {
             stats.record_tx(100);
         }
-        w.update(Instant::from_millis(2000), || stats.snapshot(), second);
+        w.update(Instant::from_millis(2000), &stats, second);
         assert_eq!(frames_in(&w), Some(100));
-        w.update(Instant::from_millis(2600), || stats.snapshot(), second);
+        w.update(Instant::from_millis(2600), &stats, second);
         assert_eq!(
             w.latched(),
             Some((
@@ -440,37 +486,36 @@ mod tests {
         for _ in 0..250 {
             stats.record_tx(100);
         }
-        w.update(Instant::from_millis(3600), || stats.snapshot(), second);
+        w.update(Instant::from_millis(3600), &stats, second);
         assert_eq!(frames_in(&w), Some(250));
     }
 
     #[test]
-    fn window_latches_after_one_period_and_snapshots_only_then() {
+    fn window_latches_after_one_period_from_its_boundary_snapshots_only() {
         let stats = BusStats::new();
         let mut w = RateWindow::new();
         let second = Duration::from_secs(1);
-        let snapshots = core::cell::Cell::new(0);
-        let snap = || {
-            snapshots.set(snapshots.get() + 1);
-            stats.snapshot()
-        };
-        w.update(Instant::from_micros(0), snap, second);
+        w.update(Instant::from_micros(0), &stats, second);
         for _ in 0..500 {
             stats.record_tx(100);
         }
-        w.update(Instant::from_millis(500), snap, second);
-        assert_eq!(w.latched(), None); // window not complete
-        assert_eq!(snapshots.get(), 1); // no snapshot mid-window
-        w.update(Instant::from_millis(1000), snap, second);
+        // Mid-window: nothing latched, and nothing taken (a snapshot here would become the
+        // window's start and drop the 500 frames before it).
+        w.update(Instant::from_millis(500), &stats, second);
+        assert_eq!(w.latched(), None);
+        stats.record_tx_full();
+        stats.record_tx_bus_off();
+        stats.record_batch_overflow(2);
+        w.update(Instant::from_millis(1000), &stats, second);
         let (elapsed, counts) = w.latched().unwrap();
         assert_eq!(elapsed, second);
         let rates = counts.rates(elapsed, 1_000_000);
         assert_eq!(rates.tx_frames_per_s, 500.0);
+        assert_eq!(rates.tx_dropped_per_s, 4.0); // 1 full + 1 bus-off + 2 batch overflow
+        // 500 frames × 100 bits in 1 s at 1 Mbit/s.
         assert!((rates.load_percent - 5.0).abs() < 1e-4);
-        assert_eq!(snapshots.get(), 2);
         // Time going backwards starts a new window and keeps the last complete one.
-        w.update(Instant::from_millis(400), snap, second);
+        w.update(Instant::from_millis(400), &stats, second);
         assert_eq!(w.latched(), Some((elapsed, counts)));
-        assert_eq!(snapshots.get(), 3);
     }
 }
