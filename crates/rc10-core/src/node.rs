@@ -287,9 +287,12 @@ pub struct TxBatch {
     /// The slot frame written last, as (command ID, index in `frames`): the motors of one
     /// command frame are usually packed one after another, so the next slot write finds its
     /// frame here without a search. Only ever a slot frame's true position (reset whenever
-    /// frames move).
-    last_slot: Option<(u16, usize)>,
+    /// frames move); the ID [`NO_SLOT_FRAME`] (no standard ID) when there is none.
+    last_slot: (u16, u8),
 }
+
+/// [`TxBatch`]'s "no slot frame written yet": above every standard ID, so no slot matches it.
+const NO_SLOT_FRAME: (u16, u8) = (u16::MAX, 0);
 
 impl TxBatch {
     /// An empty batch.
@@ -298,7 +301,7 @@ impl TxBatch {
             frames: heapless::Vec::new(),
             slot_frames: 0,
             overflowed: 0,
-            last_slot: None,
+            last_slot: NO_SLOT_FRAME,
         }
     }
 
@@ -320,7 +323,7 @@ impl TxBatch {
     /// anyway, the two frames stay separate).
     pub fn write_slot(&mut self, slot: CommandSlot, value: i16) -> bool {
         let index = match self.last_slot {
-            Some((id, index)) if id == slot.id => index,
+            (id, index) if id == slot.id => usize::from(index),
             _ => {
                 let index = match self.slot_frame_index(slot.id) {
                     Some(i) => i,
@@ -337,16 +340,18 @@ impl TxBatch {
                         index
                     }
                 };
-                self.last_slot = Some((slot.id, index));
+                // index < MAX_FRAMES_PER_TICK = 16: fits a u8.
+                self.last_slot = (slot.id, index as u8);
                 index
             }
         };
         let Some(frame) = self.frames.get_mut(index) else {
             return false; // unreachable: the index is a frame's
         };
-        // Slot `index` is bytes 2·index and 2·index + 1.
+        // Slot `index` is bytes 2·index and 2·index + 1; `index & 3` is `index` (below 4, as
+        // `CommandSlot::new` checked) in a form the compiler knows is in bounds.
         let (pairs, _) = frame.buffer_mut().as_chunks_mut::<2>();
-        if let Some(pair) = pairs.get_mut(usize::from(slot.index)) {
+        if let Some(pair) = pairs.get_mut(usize::from(slot.index & 3)) {
             *pair = value.to_be_bytes();
         }
         true
@@ -386,7 +391,7 @@ impl TxBatch {
             if whole > frames_per_tick || !sends.matches(frame.id()) {
                 self.frames.remove(i);
                 // Frames after `i` moved down: the remembered slot frame may have moved.
-                self.last_slot = None;
+                self.last_slot = NO_SLOT_FRAME;
                 // Slot-frame flags above `i` move down with their frames.
                 let below = self.slot_frames & ((1u16 << i) - 1);
                 let above = (self.slot_frames >> (i + 1)) << i;
@@ -414,7 +419,7 @@ impl TxBatch {
         self.frames.clear();
         self.slot_frames = 0;
         self.overflowed = 0;
-        self.last_slot = None;
+        self.last_slot = NO_SLOT_FRAME;
     }
 }
 
