@@ -1,5 +1,7 @@
 //! rc10-core checks on the Cortex-M4 instruction set (hard-float ABI, the M4's FPU, no std),
-//! under QEMU: PID arithmetic, the encoder's exact multi-turn counting, DJI frame packing.
+//! under QEMU: PID arithmetic, the encoder's exact multi-turn counting, DJI frame packing,
+//! rounding of command values to wire integers (the M4's FPU adds to nearest and converts
+//! towards zero, which the rounding without `roundf` relies on).
 //! Expected values are worked out by hand, as in the host tests. Exits non-zero on failure.
 #![no_std]
 #![no_main]
@@ -12,6 +14,7 @@ use rc10_core::can::CanFrame;
 use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
 use rc10_core::motor::Motor;
 use rc10_core::motor::dji::DjiMotor;
+use rc10_core::motor::vesc::VescCommand;
 use rc10_core::node::TxBatch;
 use rc10_core::pid::{Pid, PidConfig};
 use rc10_core::time::Instant;
@@ -101,6 +104,26 @@ fn main() -> ! {
         frames
             .get(1)
             .is_some_and(|f| f.raw_id() == 0x1FF && f.data() == [0, 0, 0xF6, 0x3C, 0, 0, 0, 0]),
+    );
+    // Rounding to wire integers, half away from zero, saturating (SET_RPM carries eRPM as
+    // is): 2.5 → 3, -2.5 → -3, 2.4999998 → 2, 0.49999997 → 0, 3·10⁹ → i32::MAX.
+    let erpm = |v: f32| {
+        VescCommand::Erpm(v)
+            .to_frame(9)
+            .and_then(|f| f.data().try_into().ok().map(i32::from_be_bytes))
+    };
+    check(
+        "VESC eRPM rounds half away from zero",
+        erpm(2.5) == Some(3) && erpm(-2.5) == Some(-3) && erpm(2.499_999_8) == Some(2),
+    );
+    check(
+        "VESC eRPM 0.49999997 → 0, 3e9 saturates",
+        erpm(0.499_999_97) == Some(0) && erpm(3.0e9) == Some(i32::MAX),
+    );
+    // C610: 1000 counts per amp; 0.5 mA is a tie, away from zero.
+    check(
+        "M2006 ±0.5 mA → ±1 count",
+        FEEDER.command_to_raw(0.0005) == 1 && FEEDER.command_to_raw(-0.0005) == -1,
     );
     hprintln!("selftest: all passed");
     debug::exit(debug::EXIT_SUCCESS);
