@@ -229,24 +229,17 @@ impl Cascade {
     /// zero) and, in closed-loop modes, within the speed loop's own output limit. In current /
     /// voltage / torque mode the target is passed through, clamped.
     pub fn step(&mut self, m: &Measured, dt_s: f32, limit: f32) -> f32 {
-        // `target` and `feed_forward` are finite (their setters refuse anything else) and so
-        // is the angle loop's output: the loops check only the measurement.
-        self.output = match self.mode {
-            ControlMode::Disabled => 0.0,
+        let speed_target_rpm = match self.mode {
+            ControlMode::Disabled => {
+                self.output = 0.0;
+                return 0.0;
+            }
             ControlMode::Current | ControlMode::Voltage | ControlMode::Torque => {
-                // A NaN or negative limit counts as zero (the loops below do the same).
-                saturate(self.target, if limit > 0.0 { limit } else { 0.0 })
+                // A NaN or negative limit counts as zero (the speed loop does the same).
+                self.output = saturate(self.target, if limit > 0.0 { limit } else { 0.0 });
+                return self.output;
             }
-            ControlMode::Speed => {
-                self.speed_target_rpm = self.target;
-                self.speed.output_within_finite_target(
-                    self.target,
-                    m.speed_rpm,
-                    self.feed_forward,
-                    dt_s,
-                    limit,
-                )
-            }
+            ControlMode::Speed => self.target,
             ControlMode::Angle | ControlMode::TotalAngle => {
                 self.angle_dt_s += dt_s;
                 let divider = self.config.angle_divider.max(1);
@@ -257,7 +250,9 @@ impl Cascade {
                     } else {
                         m.total_angle_deg
                     };
-                    self.speed_target_rpm = self.angle.output_within_finite_target(
+                    // Every `angle_divider` ticks: the general entry point (its finiteness
+                    // checks cost nothing that matters here).
+                    self.speed_target_rpm = self.angle.output_within(
                         self.target,
                         measured,
                         0.0,
@@ -267,15 +262,20 @@ impl Cascade {
                     self.ticks_since_angle = 0;
                     self.angle_dt_s = 0.0;
                 }
-                self.speed.output_within_finite_target(
-                    self.speed_target_rpm,
-                    m.speed_rpm,
-                    self.feed_forward,
-                    dt_s,
-                    limit,
-                )
+                self.speed_target_rpm
             }
         };
+        // One call site for the speed loop, in speed and angle modes alike. Its target is
+        // finite (the target's setter refuses anything else, and the angle loop's output is
+        // finite) and so is the feed-forward: only the measurement is checked.
+        self.speed_target_rpm = speed_target_rpm;
+        self.output = self.speed.output_within_finite_target(
+            speed_target_rpm,
+            m.speed_rpm,
+            self.feed_forward,
+            dt_s,
+            limit,
+        );
         self.output
     }
 }

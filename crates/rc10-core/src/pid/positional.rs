@@ -340,7 +340,7 @@ impl Pid {
     /// [`output_within`](Self::output_within) for a caller that keeps `target` and
     /// `feed_forward` finite itself (the cascade, whose setters refuse anything else): only
     /// `measurement` is checked (a non-finite one returns `0.0` and changes nothing).
-    #[inline(always)]
+    #[inline]
     pub(crate) fn output_within_finite_target(
         &mut self,
         target: f32,
@@ -352,7 +352,15 @@ impl Pid {
         if !measurement.is_finite() {
             return 0.0;
         }
-        self.step_finite(target, measurement, feed_forward, dt_s, limit)
+        // The PI path only here, where the speed loop calls: one more copy of the step in
+        // the firmware, not one per entry point.
+        match self.path {
+            Path::PlainPi => {
+                self.step_plain::<true>(target, measurement, feed_forward, dt_s, limit)
+            }
+            Path::Plain => self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit),
+            Path::General => self.step_general(target, measurement, feed_forward, dt_s, limit),
+        }
     }
 
     /// One step for finite `target`, `measurement` and `feed_forward`: updates the state and
@@ -366,8 +374,9 @@ impl Pid {
     ///
     /// The configuration is looked at once, when it is set ([`Path`]): without a deadband,
     /// integral separation or D filter (the usual speed and angle loops) the step is the
-    /// general one with those parts known to do nothing, so they are not computed at all;
-    /// a linear PI loop (the usual speed loop) also skips the D term and the error mode.
+    /// general one with those parts known to do nothing, so they are not computed at all.
+    /// (A linear PI loop also skips the D term and the error mode, but only where the speed
+    /// loop calls: [`output_within_finite_target`](Self::output_within_finite_target).)
     #[inline(always)]
     fn step_finite(
         &mut self,
@@ -378,10 +387,10 @@ impl Pid {
         limit: f32,
     ) -> f32 {
         match self.path {
-            Path::PlainPi => {
-                self.step_plain::<true>(target, measurement, feed_forward, dt_s, limit)
+            // The plain step covers a PI loop too (it tests kd and ki itself).
+            Path::PlainPi | Path::Plain => {
+                self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit)
             }
-            Path::Plain => self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit),
             Path::General => self.step_general(target, measurement, feed_forward, dt_s, limit),
         }
     }
@@ -426,8 +435,9 @@ impl Pid {
     /// [`step_finite`](Self::step_finite) for a configuration without deadband, integral
     /// separation or D filter: the error is always in band, `|e| ≤ 0` only for `±0` (which
     /// the deadband turns into `+0`, as `e + 0.0` does), and D passes unfiltered. With `PI`
-    /// ([`Path::PlainPi`]) the error is also linear, D is 0 and I runs.
-    #[inline(always)]
+    /// ([`Path::PlainPi`]) the error is also linear, D is 0 and I runs. Inlined where the
+    /// optimiser chooses (forced, the chassis firmware grew by almost a kilobyte).
+    #[inline]
     fn step_plain<const PI: bool>(
         &mut self,
         target: f32,
@@ -904,7 +914,16 @@ mod tests {
             let mut general = plain;
             general.path = Path::General;
             for (target, meas, ff, dt, limit) in steps {
-                let a = plain.update_within(target, meas, ff, dt, limit);
+                // The plain (and PI) side through the cascade's entry point where its
+                // precondition holds (finite target and feed-forward), the public one where
+                // it does not; the general side always through the public one.
+                let a = if target.is_finite() {
+                    let out = plain.output_within_finite_target(target, meas, ff, dt, limit);
+                    prop_assert_eq!(out.to_bits(), plain.last_terms().output.to_bits());
+                    plain.last_terms()
+                } else {
+                    plain.update_within(target, meas, ff, dt, limit)
+                };
                 let b = general.update_within(target, meas, ff, dt, limit);
                 let bits = |t: PidTerms| [t.p, t.i, t.d, t.ff, t.output].map(f32::to_bits);
                 prop_assert_eq!(bits(a), bits(b));
