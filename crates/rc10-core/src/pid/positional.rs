@@ -315,7 +315,7 @@ impl Pid {
         if !all_finite(target, measurement, feed_forward) {
             return PidTerms::ZERO;
         }
-        self.step_finite(target, measurement, feed_forward, dt_s, limit);
+        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit);
         self.last
     }
 
@@ -334,7 +334,7 @@ impl Pid {
         if !all_finite(target, measurement, feed_forward) {
             return 0.0;
         }
-        self.step_finite(target, measurement, feed_forward, dt_s, limit)
+        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit)
     }
 
     /// [`output_within`](Self::output_within) for a caller that keeps `target` and
@@ -354,13 +354,7 @@ impl Pid {
         }
         // The PI path only here, where the speed loop calls: one more copy of the step in
         // the firmware, not one per entry point.
-        match self.path {
-            Path::PlainPi => {
-                self.step_plain::<true>(target, measurement, feed_forward, dt_s, limit)
-            }
-            Path::Plain => self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit),
-            Path::General => self.step_general(target, measurement, feed_forward, dt_s, limit),
-        }
+        self.step_finite::<true>(target, measurement, feed_forward, dt_s, limit)
     }
 
     /// One step for finite `target`, `measurement` and `feed_forward`: updates the state and
@@ -375,10 +369,11 @@ impl Pid {
     /// The configuration is looked at once, when it is set ([`Path`]): without a deadband,
     /// integral separation or D filter (the usual speed and angle loops) the step is the
     /// general one with those parts known to do nothing, so they are not computed at all.
-    /// (A linear PI loop also skips the D term and the error mode, but only where the speed
-    /// loop calls: [`output_within_finite_target`](Self::output_within_finite_target).)
+    /// With `PI_PATH` a linear PI loop also skips the D term and the error mode (what the
+    /// speed loop's entry point, [`output_within_finite_target`](Self::output_within_finite_target),
+    /// asks for); without it the plain step serves a PI loop too (it tests kd and ki itself).
     #[inline(always)]
-    fn step_finite(
+    fn step_finite<const PI_PATH: bool>(
         &mut self,
         target: f32,
         measurement: f32,
@@ -387,7 +382,9 @@ impl Pid {
         limit: f32,
     ) -> f32 {
         match self.path {
-            // The plain step covers a PI loop too (it tests kd and ki itself).
+            Path::PlainPi if PI_PATH => {
+                self.step_plain::<true>(target, measurement, feed_forward, dt_s, limit)
+            }
             Path::PlainPi | Path::Plain => {
                 self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit)
             }
