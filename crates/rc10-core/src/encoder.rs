@@ -578,16 +578,7 @@ mod tests {
             assert_eq!(round_clamped(x), want, "{x}");
         }
         // And libm's `roundf` agrees on values spread over every magnitude and ties.
-        let mut bits = 0x1234_5678u32;
-        for k in 0..200_000u32 {
-            bits ^= bits << 13;
-            bits ^= bits >> 17;
-            bits ^= bits << 5;
-            let x = if k % 2 == 0 {
-                f32::from_bits(bits)
-            } else {
-                (bits % 4_000_000) as f32 * 0.25 - 500_000.0 // many exact halves
-            };
+        for x in crate::math::rounding_samples(0x1234_5678, 1_000_000) {
             let want = libm::roundf(x).clamp(-1.0e6, 1.0e6) as i32;
             assert_eq!(round_clamped(x), want, "{x}");
         }
