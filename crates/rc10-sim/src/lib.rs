@@ -28,3 +28,5 @@ pub mod metrics;
 pub mod output;
 pub mod plant;
 pub mod scenario;
+#[cfg(test)]
+mod test_values;

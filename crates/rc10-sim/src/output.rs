@@ -507,36 +507,35 @@ mod tests {
     /// "-0.0000", the 1e9 limit, non-finite values, and a wide deterministic spread (f64 and
     /// f32 values).
     fn awkward_values() -> Vec<f64> {
-        let mut v = vec![
-            0.0,
-            -0.0,
-            f64::NAN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            1e-300,
-            -1e-300,
-        ];
-        for base in [
-            0.0,
-            1.0,
-            9.0,
-            99.0,
-            482.0,
-            8191.0,
-            16384.0,
-            123_456.0,
-            999_999_999.0,
-            1e9,
-        ] {
-            for offset in [
+        let mut v = crate::test_values::around_edges(
+            &[
+                0.0,
+                -0.0,
+                f64::NAN,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                1e-300,
+                -1e-300,
+            ],
+            &[
+                0.0,
+                1.0,
+                9.0,
+                99.0,
+                482.0,
+                8191.0,
+                16384.0,
+                123_456.0,
+                999_999_999.0,
+                1e9,
+            ],
+            &[
                 0.0, 0.5, 0.05, 0.005, 0.0005, 0.00005, 0.25, 0.125, 0.03125, 0.99995,
-            ] {
-                for sign in [1.0, -1.0] {
-                    let x: f64 = sign * (base + offset);
-                    v.extend([x, x.next_up(), x.next_down(), f64::from(x as f32)]);
-                }
-            }
-        }
+            ],
+        );
+        // Each of them as the nearest f32 too (values rc10 hands over as f32).
+        let as_f32: Vec<f64> = v.iter().map(|x| f64::from(*x as f32)).collect();
+        v.extend(as_f32);
         // Decimal near-ties: (k + ½)/10^d and its neighbours, whose scaled value often lands
         // exactly on the half.
         for d in [10.0, 100.0, 1e3, 1e4] {

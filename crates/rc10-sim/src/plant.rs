@@ -579,39 +579,35 @@ mod tests {
     /// Values around every rounding edge the fast paths must match: ties, just inside and
     /// outside them, signed zeros, the i16/u8/8192 edges, the fast-path limit, non-finite.
     fn awkward_values() -> Vec<f64> {
-        let mut v = vec![
-            0.0,
-            -0.0,
-            f64::NAN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::MIN_POSITIVE,
-        ];
-        for base in [
-            0.0,
-            1.0,
-            2.0,
-            255.0,
-            256.0,
-            8191.0,
-            8192.0,
-            16384.0,
-            32767.0,
-            32768.0,
-            1e6,
-            1e15,
-            4503599627370496.0,
-            9007199254740992.0,
-            1e19,
-            1e300,
-        ] {
-            for offset in [0.0, 0.5, -0.5, 0.25, 0.75, 1.0 - 1e-9] {
-                for sign in [1.0, -1.0] {
-                    let x: f64 = sign * (base + offset);
-                    v.extend([x, x.next_up(), x.next_down()]);
-                }
-            }
-        }
+        let mut v = crate::test_values::around_edges(
+            &[
+                0.0,
+                -0.0,
+                f64::NAN,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::MIN_POSITIVE,
+            ],
+            &[
+                0.0,
+                1.0,
+                2.0,
+                255.0,
+                256.0,
+                8191.0,
+                8192.0,
+                16384.0,
+                32767.0,
+                32768.0,
+                1e6,
+                1e15,
+                4503599627370496.0,
+                9007199254740992.0,
+                1e19,
+                1e300,
+            ],
+            &[0.0, 0.5, -0.5, 0.25, 0.75, 1.0 - 1e-9],
+        );
         // A deterministic spread over ±1e5 and ±1e16.
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
         for _ in 0..20_000 {
