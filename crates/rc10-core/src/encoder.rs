@@ -434,25 +434,16 @@ impl Encoder {
             clippy::arithmetic_side_effects,
             reason = "centre is within [1, 10^6]: gap is clamped"
         )]
-        let window = (centre - 2).max(1)..=centre + 2;
-        let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
-        for m in window {
-            let predicted = counts_per_period * to_f32(m);
-            let step = plus_whole_turns(d0, (predicted - to_f32(d0)) / nf, cpr);
-            let residual = (to_f32(step) - predicted).abs();
-            let distance = (to_f32(m) - gap).abs();
-            let better = match best {
-                None => true,
-                Some((r, d, _)) => {
-                    residual + AMBIGUOUS_COUNTS < r
-                        || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
-                }
-            };
-            if better {
-                best = Some((residual, distance, step));
-            }
-        }
-        let step = best.map_or(d0, |(_, _, step)| step);
+        let (first, last_m) = ((centre - 2).max(1), centre + 2);
+        // The turn count each candidate gives is monotonic in `m` (every operation of
+        // `step_for` is): when the outermost two agree, every candidate gives the same step
+        // and the search below could only return it.
+        let lowest = step_for(d0, counts_per_period, first, cpr);
+        let step = if lowest == step_for(d0, counts_per_period, last_m, cpr) {
+            lowest
+        } else {
+            best_step(d0, counts_per_period, gap, first..=last_m, cpr)
+        };
         self.total_counts = self.total_counts.saturating_add(step);
         self.last_raw = Some(raw);
         Ok(())
@@ -494,6 +485,42 @@ impl Encoder {
         self.last_raw = None;
         self.total_counts = 0;
     }
+}
+
+/// The step `d0 + k · cpr` nearest the motion `counts_per_period · m` predicts for an interval
+/// of `m` periods.
+fn step_for(d0: i64, counts_per_period: f32, m: i64, cpr: u16) -> i64 {
+    let predicted = counts_per_period * to_f32(m);
+    plus_whole_turns(d0, (predicted - to_f32(d0)) / f32::from(cpr), cpr)
+}
+
+/// Of the intervals `window` (in periods), the step of the one that explains the reading best
+/// ([`Encoder::update_periodic`]): the smallest residual between step and prediction; within
+/// [`AMBIGUOUS_COUNTS`] of each other, the interval nearer the measured `gap`.
+fn best_step(
+    d0: i64,
+    counts_per_period: f32,
+    gap: f32,
+    window: core::ops::RangeInclusive<i64>,
+    cpr: u16,
+) -> i64 {
+    let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
+    for m in window {
+        let step = step_for(d0, counts_per_period, m, cpr);
+        let residual = (to_f32(step) - counts_per_period * to_f32(m)).abs();
+        let distance = (to_f32(m) - gap).abs();
+        let better = match best {
+            None => true,
+            Some((r, d, _)) => {
+                residual + AMBIGUOUS_COUNTS < r
+                    || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
+            }
+        };
+        if better {
+            best = Some((residual, distance, step));
+        }
+    }
+    best.map_or(d0, |(_, _, step)| step)
 }
 
 /// Two candidate steps whose fits to a whole number of periods differ by less than this many
@@ -868,6 +895,36 @@ mod tests {
             }
             let a = e.angle_deg();
             prop_assert!((0.0..360.0).contains(&a));
+        }
+
+        /// The shortcut (the outermost candidates agree, so all do) takes the step the full
+        /// search takes, for any reading, speed and gap, down to a 14-bit encoder.
+        #[test]
+        fn periodic_shortcut_takes_the_step_the_full_search_takes(
+            counts_per_rev in prop_oneof![Just(8192u16), Just(16384), 2u16..9000],
+            from in 0u16..u16::MAX,
+            to in 0u16..u16::MAX,
+            counts_per_period in prop_oneof![-20_000.0f32..20_000.0, -3_000.0f32..3_000.0],
+            gap in prop_oneof![0.5f32..6.0, 0.0f32..2_000_000.0],
+        ) {
+            let config = EncoderConfig { counts_per_rev, ..EncoderConfig::dji(GearRatio::DIRECT) };
+            let (from, to) = (from % counts_per_rev, to % counts_per_rev);
+            let mut e = Encoder::new(config).unwrap();
+            e.update(from).unwrap();
+            let before = e.total_counts();
+            e.update_periodic(to, counts_per_period, gap).unwrap();
+            let nf = f32::from(counts_per_rev);
+            prop_assume!(counts_per_period.abs() * 4.0 >= nf * 0.25);
+            let gap = gap.clamp(1.0, 1.0e6);
+            let centre = i64::from(round_clamped(gap));
+            let expected = best_step(
+                wrapped_step(to, from, counts_per_rev),
+                counts_per_period,
+                gap,
+                (centre - 2).max(1)..=centre + 2,
+                counts_per_rev,
+            );
+            prop_assert_eq!(e.total_counts() - before, expected);
         }
 
         /// Any speed a DJI rotor reaches (±18 000 rpm = ±2457.6 counts per 1 ms frame), any
