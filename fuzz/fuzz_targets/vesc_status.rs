@@ -37,7 +37,7 @@ fuzz_target!(|data: &[u8]| run(data));
 fn run(data: &[u8]) {
     let mut u = Unstructured::new(data);
     let byte = |u: &mut Unstructured<'_>| u8::arbitrary(u).unwrap_or(0);
-    let vesc_id = byte(&mut u);
+    let vesc_id = byte(&mut u).min(254); // 255: the broadcast address, refused
     let pole_pairs = byte(&mut u).max(1);
     let gear = GearRatio::new(
         u32::from(byte(&mut u) % 64 + 1),

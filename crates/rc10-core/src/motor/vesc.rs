@@ -217,6 +217,9 @@ pub enum VescError {
     /// The status set lacks STATUS_1, the packet that keeps the motor online: it would never
     /// be driven.
     NoStatus1,
+    /// Controller id 255 is the VESC firmware's broadcast address: every VESC on the bus obeys
+    /// a command sent to it, and none reports status under it.
+    BroadcastId,
 }
 
 impl fmt::Display for VescError {
@@ -225,6 +228,9 @@ impl fmt::Display for VescError {
             Self::ZeroPolePairs => "VESC pole pairs must be at least 1",
             Self::InvalidLimit => "VESC limit is NaN or negative",
             Self::NoStatus1 => "VESC status packets must include STATUS_1",
+            Self::BroadcastId => {
+                "VESC controller id 255 is the broadcast address (every VESC obeys it)"
+            }
         })
     }
 }
@@ -276,8 +282,12 @@ pub struct VescMotor {
 }
 
 impl VescMotor {
-    /// A VESC with CAN controller id `vesc_id` (any 0–255).
+    /// A VESC with CAN controller id `vesc_id` (0–254; 255 is the broadcast address, refused
+    /// with [`VescError::BroadcastId`]).
     pub const fn new(vesc_id: u8, config: VescConfig) -> Result<Self, VescError> {
+        if vesc_id == u8::MAX {
+            return Err(VescError::BroadcastId);
+        }
         if config.pole_pairs == 0 {
             return Err(VescError::ZeroPolePairs);
         }
@@ -846,6 +856,18 @@ mod tests {
         let mut silent = VescConfig::new(7);
         silent.status_packets = VescStatusSet::STATUS_4;
         assert_eq!(VescMotor::new(3, silent).unwrap_err(), VescError::NoStatus1);
+    }
+
+    #[test]
+    fn controller_id_255_is_refused_as_the_broadcast_address() {
+        // VESC firmware (comm_can.c) runs a command whose low ID byte is 255 on every VESC.
+        let cfg = VescConfig::new(7);
+        assert_eq!(
+            VescMotor::new(255, cfg).unwrap_err(),
+            VescError::BroadcastId
+        );
+        assert!(VescMotor::new(254, cfg).is_ok());
+        assert!(VescMotor::new(0, cfg).is_ok());
     }
 
     #[test]

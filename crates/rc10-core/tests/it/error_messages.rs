@@ -133,6 +133,7 @@ fn device_and_algorithm_errors_name_the_bad_setting() {
     says(VescError::ZeroPolePairs, &["pole pairs"]);
     says(VescError::InvalidLimit, &["limit"]);
     says(VescError::NoStatus1, &["STATUS_1"]);
+    says(VescError::BroadcastId, &["255", "broadcast"]);
     says(TargetError::NotFinite, &["NaN"]);
     says(TargetError::Unsupported, &["mode"]);
     says(TargetError::OutOfRange, &["range"]);

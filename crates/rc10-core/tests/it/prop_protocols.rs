@@ -396,7 +396,7 @@ proptest! {
     /// STATUS: eRPM, current and duty decode; the output speed is eRPM / (pole pairs · gear).
     #[test]
     fn vesc_status1_decodes(
-        vesc_id: u8, pole_pairs in 1u8..=50, rotor_turns in 1u32..=100, output_turns in 1u32..=10,
+        vesc_id in 0u8..=254, pole_pairs in 1u8..=50, rotor_turns in 1u32..=100, output_turns in 1u32..=10,
         erpm: i32, current_x10: i16, duty_x1000: i16, other_id: u8,
     ) {
         let mut config = VescConfig::new(pole_pairs);
@@ -427,7 +427,7 @@ proptest! {
 
     /// STATUS_4: temperatures and (direct drive) the PID position, wrapped to [0, 360).
     #[test]
-    fn vesc_status4_decodes(vesc_id: u8, fet: i16, motor: i16, current_in: i16, pid_pos: i16) {
+    fn vesc_status4_decodes(vesc_id in 0u8..=254, fet: i16, motor: i16, current_in: i16, pid_pos: i16) {
         let mut config = VescConfig::new(7);
         config.status_packets = VescStatusSet::STATUS_1.with(VescStatusSet::STATUS_4);
         let m = VescMotor::new(vesc_id, config).unwrap();
