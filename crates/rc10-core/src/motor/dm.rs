@@ -22,9 +22,16 @@
 //! E overload.
 //!
 //! Positions are of the output shaft (the motor's driver accounts for its gearbox). The
-//! reported position wraps at ±`p_max`; this driver unwraps it into a multi-turn angle.
+//! reported position wraps at ±`p_max`; this driver unwraps it into a multi-turn angle. When
+//! feedback returns after the motor was offline, [`HealthConfig::on_return`] decides:
+//! `Continue` unwraps the first new position against the last one before the outage (the
+//! output moved less than `p_max` meanwhile), `Restart` takes it as it comes, with no wraps
+//! (choose it if the motor may have been power-cycled: its reported position then starts
+//! again from its saved zero).
 
-use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
+use super::{
+    ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,
+};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::GearRatio;
 use crate::math::{constrain, deg_to_rad, rad_to_deg, wrap_deg_360, wrap_signed};
@@ -262,7 +269,8 @@ pub struct DmConfig {
     pub auto_enable: bool,
     /// Gearbox of the motor (informational: positions are already of the output shaft).
     pub gear: GearRatio,
-    /// Offline timeout.
+    /// Offline timeout and the multi-turn policy when feedback returns (see the module
+    /// docs); thermal limits are not applied (the motor protects itself and reports faults).
     pub health: HealthConfig,
 }
 
@@ -318,6 +326,8 @@ struct DmState {
     status: DmStatus,
     position_rad: Option<f32>,
     wraps: i32,
+    /// Went offline; the next feedback applies the return policy.
+    awaiting_return: bool,
     velocity_rad_s: f32,
     torque_nm: f32,
     mos_temp_c: Option<f32>,
@@ -395,6 +405,7 @@ impl DmMotor {
                 status: DmStatus::Disabled,
                 position_rad: None,
                 wraps: 0,
+                awaiting_return: false,
                 velocity_rad_s: 0.0,
                 torque_nm: 0.0,
                 mos_temp_c: None,
@@ -554,6 +565,13 @@ impl CanNode for DmMotor {
         let t_raw = ((u32::from(d[4]) & 0xF) << 8) | u32::from(d[5]);
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
+            if s.awaiting_return {
+                s.awaiting_return = false;
+                if self.config.health.on_return == MultiTurnOnReturn::Restart {
+                    s.position_rad = None;
+                    s.wraps = 0;
+                }
+            }
             if let Some(prev) = s.position_rad {
                 if p - prev > l.p_max_rad {
                     s.wraps = s.wraps.saturating_sub(1);
@@ -576,7 +594,9 @@ impl CanNode for DmMotor {
         let health = self.config.health;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
-            s.liveness.check(&health, now);
+            if s.liveness.check(&health, now) {
+                s.awaiting_return = true;
+            }
             let online = s.liveness.is_online();
             if let Some(deg) = s.pending_home_deg
                 && s.position_rad.is_some()
@@ -849,6 +869,51 @@ mod tests {
         // so 0xFFF0 → 0x0010 is 15 + 16 = 31 codes of 25/65535 rad.
         let step_deg = rad_to_deg(31.0 * 25.0 / 65535.0);
         assert!((m.total_angle_deg().unwrap() - before - step_deg).abs() < 0.01);
+    }
+
+    /// A DM4310 that made one wrap (+1 turn of the 25 rad range), then went offline.
+    fn wrapped_then_offline(policy: MultiTurnOnReturn) -> DmMotor {
+        let mut cfg = DmConfig::new(0x11);
+        cfg.health = cfg.health.with_on_return(policy);
+        let m = DmMotor::new(0x01, cfg).unwrap();
+        m.update_feedback(&feedback(1, 1, 0xFFF0, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.update_feedback(&feedback(1, 1, 0x0010, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.update(T0, 0.001);
+        assert!(m.is_online());
+        // 100 ms offline timeout: silent for 150 ms.
+        m.update(Instant::from_millis(157), 0.001);
+        assert!(!m.is_online());
+        m
+    }
+
+    #[test]
+    fn return_after_an_outage_follows_the_multi_turn_policy() {
+        // Code 0x4000 is 25 · 16384 / 65535 - 12.5 ≈ -6.25 rad.
+        let back = feedback(1, 1, 0x4000, 0x7FF, 0x7FF, 30, 30);
+        let code_deg = rad_to_deg(25.0 * 16384.0 / 65535.0 - 12.5);
+        let range_deg = rad_to_deg(25.0);
+        let t = Instant::from_millis(160);
+
+        // Continue: 0x0010 → 0x4000 is less than half the range: no new wrap, the one before
+        // the outage kept.
+        let m = wrapped_then_offline(MultiTurnOnReturn::Continue);
+        m.update_feedback(&back, t).unwrap();
+        assert!((m.total_angle_deg().unwrap() - (code_deg + range_deg)).abs() < 0.01);
+
+        // Restart: the wrap before the outage is forgotten; the position is taken as reported.
+        let m = wrapped_then_offline(MultiTurnOnReturn::Restart);
+        m.update_feedback(&back, t).unwrap();
+        assert!((m.total_angle_deg().unwrap() - code_deg).abs() < 0.01);
+        // And counting goes on from there: forward in steps under half the range, then across
+        // the range end, counted as a wrap.
+        for code in [0xA000, 0xFFF0, 0x0010] {
+            m.update_feedback(&feedback(1, 1, code, 0x7FF, 0x7FF, 30, 30), t)
+                .unwrap();
+        }
+        let wrapped = rad_to_deg(25.0 * 16.0 / 65535.0 - 12.5) + range_deg;
+        assert!((m.total_angle_deg().unwrap() - wrapped).abs() < 0.01);
     }
 
     #[test]
