@@ -17,7 +17,7 @@
 //!
 //! GM6020 voltage range: the 2018 manual and DJI's examples give ±30000; newer motor firmware
 //! is reported (third-party) to saturate at ±25000. rc10 defaults to ±25000, which is safe on
-//! both, and lets you raise it ([`DjiConfig::voltage_raw_limit`]). Volts are converted at
+//! both, and lets you raise it up to 30000 ([`DjiConfig::voltage_raw_limit`]). Volts are converted at
 //! 30000 ↔ 24 V (the 2018 manual's full scale at the rated supply; derived).
 //!
 //! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
@@ -37,6 +37,9 @@ use core::fmt;
 use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+/// The largest GM6020 voltage-mode command the protocol defines (2018 manual: ±30000).
+const GM6020_MAX_VOLTAGE_RAW: i16 = 30000;
 
 /// DJI ESCs send feedback every millisecond.
 const FEEDBACK_PERIOD_US: u64 = 1000;
@@ -160,8 +163,9 @@ pub struct DjiConfig {
     /// Offline timeout, multi-turn policy and thermal limits.
     pub health: HealthConfig,
     /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
-    /// firmware); must be positive. Ignored by the other models. When raising it, raise the
-    /// speed loop's `output_limit` (volts, 30000 ↔ 24 V) too, or the loop never asks for more.
+    /// firmware); must be within 1–30000, the protocol's range. Ignored by the other models.
+    /// When raising it, raise the speed loop's `output_limit` (volts, 30000 ↔ 24 V) too, or
+    /// the loop never asks for more.
     pub voltage_raw_limit: i16,
     /// Where the multi-turn angle starts. Default: power-on for the geared M3508 and M2006
     /// (their rotor angle says nothing about the output's position), absolute with zero
@@ -249,7 +253,8 @@ pub enum DjiError {
     InvalidOrigin,
     /// Thermal limits that are not finite or where derating does not start below the cut-off.
     InvalidThermal,
-    /// A GM6020 voltage-mode raw limit that is not positive (it would silence the motor).
+    /// A GM6020 voltage-mode raw limit that is not positive (it would silence the motor) or
+    /// is above 30000, the protocol's largest command (±30000 ↔ ±24 V).
     InvalidVoltageLimit,
 }
 
@@ -262,7 +267,7 @@ impl fmt::Display for DjiError {
             Self::InvalidThermal => {
                 f.write_str("DJI thermal limits not finite or derating not below cut-off")
             }
-            Self::InvalidVoltageLimit => f.write_str("GM6020 voltage raw limit not positive"),
+            Self::InvalidVoltageLimit => f.write_str("GM6020 voltage raw limit not within 1-30000"),
         }
     }
 }
@@ -384,7 +389,9 @@ impl DjiMotor {
         let Some(slot) = model.command_slot(esc_id) else {
             return Err(DjiError::IdOutOfRange { id: esc_id, max });
         };
-        if model.is_voltage_mode() && config.voltage_raw_limit <= 0 {
+        if model.is_voltage_mode()
+            && !(config.voltage_raw_limit > 0 && config.voltage_raw_limit <= GM6020_MAX_VOLTAGE_RAW)
+        {
             return Err(DjiError::InvalidVoltageLimit);
         }
         if let Some(t) = config.health.thermal

@@ -533,14 +533,20 @@ fn gm6020_voltage_limit_in_volts_and_raw_target() {
 }
 
 #[test]
-fn non_positive_gm6020_voltage_limit_is_rejected() {
-    for limit in [0, -100] {
+fn gm6020_voltage_limit_outside_the_protocol_range_is_rejected() {
+    // The 2018 manual's range is ±30000: 30001 and up are not commands the motor defines.
+    for limit in [0, -100, 30001, i16::MAX] {
         let mut cfg = DjiConfig::default_for(DjiModel::Gm6020Voltage);
         cfg.voltage_raw_limit = limit;
         assert_eq!(
             DjiMotor::new(DjiModel::Gm6020Voltage, 1, cfg).unwrap_err(),
             DjiError::InvalidVoltageLimit
         );
+    }
+    for limit in [1, 30000] {
+        let mut cfg = DjiConfig::default_for(DjiModel::Gm6020Voltage);
+        cfg.voltage_raw_limit = limit;
+        assert!(DjiMotor::new(DjiModel::Gm6020Voltage, 1, cfg).is_ok());
     }
     // Irrelevant for the other models.
     let mut cfg = DjiConfig::default_for(DjiModel::M3508);
