@@ -3,8 +3,11 @@
 //!
 //! The yaw sweeps between -30° and +30° every 2 s (multi-turn targets, the way a gimbal that
 //! follows a world heading commands it); the pitch holds 10°. Both GM6020s use their absolute
-//! encoders: angle 0 is raw count `*_ZERO_COUNTS` (read them from the log with the motors
-//! disabled and the gimbal level, then set them here).
+//! encoders: angle 0 is raw count `*_ZERO_COUNTS`. As shipped these are `None`: the firmware
+//! then drives nothing (0 V to both motors) and logs each motor's raw count, so you can move
+//! the gimbal by hand to its zero (yaw forward, pitch level), read the counts, set them here
+//! and flash again. Until then nothing moves: a made-up zero would drive the pitch into its
+//! stops.
 //!
 //! Wiring: NUCLEO-G474RE; FDCAN2 (PB12 RX / PB13 TX) to a transceiver; GM6020 yaw set to id 1
 //! (feedback 0x205), pitch to id 2 (0x206), 24 V.
@@ -23,17 +26,23 @@ use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
 use static_cell::StaticCell;
 
-/// Raw encoder count of the yaw's mechanical zero.
-const YAW_ZERO_COUNTS: u16 = 0;
-/// Raw encoder count of the pitch's level position.
-const PITCH_ZERO_COUNTS: u16 = 0;
+/// Raw encoder count (0–8191) of the yaw's mechanical zero; `None` until you have read it.
+const YAW_ZERO_COUNTS: Option<u16> = None;
+/// Raw encoder count (0–8191) of the pitch's level position; `None` until you have read it.
+const PITCH_ZERO_COUNTS: Option<u16> = None;
+/// Both zeros set: the gimbal may move.
+const CALIBRATED: bool = YAW_ZERO_COUNTS.is_some() && PITCH_ZERO_COUNTS.is_some();
 /// Gravity torque of the pitch assembly at level, N·m (mass × centre-of-mass offset × g).
 const PITCH_GRAVITY_NM: f32 = 0.3;
 
-const fn gm6020(id: u8, zero: u16) -> DjiMotor {
+const fn gm6020(id: u8, zero: Option<u16>) -> DjiMotor {
     let mut config = DjiConfig::default_for(DjiModel::Gm6020Voltage);
+    // Without a zero, angle 0 is raw count 0: the logged angle is then the raw count.
     config.origin = Origin::Absolute {
-        zero_offset_counts: zero,
+        zero_offset_counts: match zero {
+            Some(counts) => counts,
+            None => 0,
+        },
     };
     match DjiMotor::new(DjiModel::Gm6020Voltage, id, config) {
         Ok(m) => m,
@@ -59,6 +68,13 @@ async fn main(spawner: Spawner) {
         board::control_spawner(),
     );
     spawner.spawn(defmt::unwrap!(log_state()));
+    if !CALIBRATED {
+        defmt::warn!(
+            "gimbal zeros not set: both GM6020s get 0 V; move the gimbal to its zero and copy the \
+             raw counts from the log into YAW_ZERO_COUNTS / PITCH_ZERO_COUNTS"
+        );
+        return; // No target is ever set: the motors stay disabled, the log task runs on.
+    }
 
     defmt::unwrap!(PITCH.set_feed_forward_torque_nm(PITCH_GRAVITY_NM));
     defmt::unwrap!(PITCH.set_target_angle_deg(10.0));
@@ -76,6 +92,18 @@ async fn log_state() {
     loop {
         ticker.next().await;
         let (y, p) = (YAW.state(), PITCH.state());
+        if !CALIBRATED {
+            // Zero offset 0: the single-turn angle is the raw count × 360 / 8192.
+            let raw = |deg: Option<f32>| deg.map(|d| (d * 8192.0 / 360.0 + 0.5) as u16 % 8192);
+            defmt::info!(
+                "raw counts: yaw {} pitch {} (online {}/{})",
+                raw(y.angle_deg),
+                raw(p.angle_deg),
+                y.online,
+                p.online
+            );
+            continue;
+        }
         defmt::info!(
             "yaw {} deg (target {}), pitch {} deg (target {}), commands {} V / {} V, online {}/{}",
             y.total_angle_deg,
