@@ -83,7 +83,9 @@ impl Instance {
 /// else rejected in hardware). Returns the two halves for the scheduler and receiver tasks.
 ///
 /// `instance` must name the peripheral the configurator was made from: the transport reads
-/// that FDCAN's status, message-lost and pending-buffer registers.
+/// that FDCAN's status, message-lost and pending-buffer registers. `bitrate_bps` should be the
+/// bus's own (`BusConfig::bitrate_bps`, which its load figures use): [`crate::start_can`]
+/// takes it from the bus.
 ///
 /// The FDCAN kernel clock must be configured (`config.rcc.mux.fdcansel`, e.g. PCLK1) before
 /// `CanConfigurator::new`, which otherwise panics at run time (its default source is HSE).

@@ -17,8 +17,8 @@
 //! let mut builder = BusBuilder::with_config(BusConfig::DEFAULT.with_tx_depth(rc10_stm32::can::TX_BUFFERS));
 //! builder.register(&WHEEL_1)?;
 //! let bus: &'static G4Bus = BUS.init(builder.build());
-//! let plan = rc10_stm32::filter_plan(bus)?;
-//! let (tx, rx) = rc10_stm32::can::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs), Instance::Fdcan1, &plan, 1_000_000);
+//! // Filters planned from the bus's nodes, the FDCAN started at the bus's own bitrate.
+//! let (tx, rx) = rc10_stm32::start_can(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs), Instance::Fdcan1, bus)?;
 //! control.spawn(scheduler_task(bus, tx)?);
 //! control.spawn(receiver_task(bus, rx)?);
 //! ```
@@ -38,7 +38,7 @@
 //!
 //! | RC10_LIB / FreeRTOS | rc10 on Embassy |
 //! |---|---|
-//! | `fdCANbus::init`, RX ISR → queue → RX task | [`can::start`] (filters from the registered nodes), [`tasks::receiver_task`] |
+//! | `fdCANbus::init`, RX ISR → queue → RX task | [`start_can`] (filters from the registered nodes), [`tasks::receiver_task`] |
 //! | 1 kHz `schedulerTask` with `vTaskDelayUntil` | [`tasks::scheduler_task`] (`Ticker`, missed ticks skipped) |
 //! | task priorities | `InterruptExecutor` priority for the control loop, thread mode for the rest |
 //! | `AirJoy` PPM on a timer | [`remote::ppm_task`] |
@@ -112,4 +112,24 @@ pub fn filter_plan<const N: usize>(
     bus: &rc10_core::bus::Bus<'_, N>,
 ) -> Result<can::G4FilterPlan, PlanError> {
     can::G4FilterPlan::new(bus.nodes().iter().map(|node| node.bus_usage()))
+}
+
+/// Starts a FDCAN for a frozen `bus`: the acceptance filters planned from its nodes
+/// ([`filter_plan`]) and the bitrate of its own configuration (`bus.config().bitrate_bps`, the
+/// one its load figures and frame budget are computed with), through [`can::start`], whose
+/// requirements apply (`instance` names the configurator's peripheral; the FDCAN kernel clock
+/// is configured). Returns the halves for [`tasks::scheduler_task`] and
+/// [`tasks::receiver_task`], or why the nodes' IDs do not fit the filters.
+pub fn start_can<const N: usize>(
+    configurator: embassy_stm32::can::CanConfigurator<'static>,
+    instance: can::Instance,
+    bus: &rc10_core::bus::Bus<'_, N>,
+) -> Result<(can::FdcanTx, can::FdcanRx), PlanError> {
+    let plan = filter_plan(bus)?;
+    Ok(can::start(
+        configurator,
+        instance,
+        &plan,
+        bus.config().bitrate_bps,
+    ))
 }

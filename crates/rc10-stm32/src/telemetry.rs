@@ -1,5 +1,5 @@
 //! VOFA+ telemetry over a UART with DMA: the named channels of rc10-core's
-//! [`Channels`](rc10_core::telemetry::Channels) sent as JustFloat frames at a fixed rate.
+//! [`Channels`] sent as JustFloat frames at a fixed rate.
 //!
 //! Producers (control loops, any task, any priority) only store values (one atomic word
 //! each). The sender snapshots them every period and writes the frame with DMA; when the UART

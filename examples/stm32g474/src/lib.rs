@@ -51,9 +51,14 @@ pub fn init() -> Peripherals {
     embassy_stm32::init(rc10_stm32::clocks_170mhz(rc10_stm32::Crystal::Mhz24))
 }
 
-/// A bus configuration for a G4 FDCAN: 1 Mbit/s, 1 kHz, its 3 TX buffers.
+/// A bus configuration for a G4 FDCAN: [`CAN_BITRATE_BPS`] (the FDCAN is started at this
+/// bitrate too), 1 kHz, its 3 TX buffers.
 pub const fn bus_config() -> BusConfig {
-    BusConfig::DEFAULT.with_tx_depth(TX_BUFFERS)
+    BusConfig {
+        bitrate_bps: CAN_BITRATE_BPS,
+        ..BusConfig::DEFAULT
+    }
+    .with_tx_depth(TX_BUFFERS)
 }
 
 /// An empty bus builder for a G4 FDCAN.
@@ -169,8 +174,7 @@ pub fn start_bus(
     control: SendSpawner,
 ) -> &'static G4Bus {
     let bus: &'static G4Bus = cell.init(builder.build());
-    let plan = defmt::unwrap!(rc10_stm32::filter_plan(bus));
-    let (tx, rx) = rc10_stm32::can::start(configurator, instance, &plan, CAN_BITRATE_BPS);
+    let (tx, rx) = defmt::unwrap!(rc10_stm32::start_can(configurator, instance, bus));
     control.spawn(defmt::unwrap!(scheduler_task(bus, tx)));
     control.spawn(defmt::unwrap!(receiver_task(bus, rx)));
     bus
