@@ -438,11 +438,14 @@ impl Encoder {
         // The turn count each candidate gives is monotonic in `m` (every operation of
         // `step_for` is): when the outermost two agree, every candidate gives the same step
         // and the search below could only return it.
-        let lowest = step_for(d0, counts_per_period, first, cpr);
-        let step = if lowest == step_for(d0, counts_per_period, last_m, cpr) {
-            lowest
+        let ends = (
+            step_for(d0, counts_per_period, first, cpr),
+            step_for(d0, counts_per_period, last_m, cpr),
+        );
+        let step = if ends.0 == ends.1 {
+            ends.0
         } else {
-            best_step(d0, counts_per_period, gap, first..=last_m, cpr)
+            best_step(d0, counts_per_period, gap, (first, last_m), ends, cpr)
         };
         self.total_counts = self.total_counts.saturating_add(step);
         self.last_raw = Some(raw);
@@ -494,19 +497,27 @@ fn step_for(d0: i64, counts_per_period: f32, m: i64, cpr: u16) -> i64 {
     plus_whole_turns(d0, (predicted - to_f32(d0)) / f32::from(cpr), cpr)
 }
 
-/// Of the intervals `window` (in periods), the step of the one that explains the reading best
-/// ([`Encoder::update_periodic`]): the smallest residual between step and prediction; within
-/// [`AMBIGUOUS_COUNTS`] of each other, the interval nearer the measured `gap`.
+/// Of the intervals `first..=last` (in periods), the step of the one that explains the reading
+/// best ([`Encoder::update_periodic`]): the smallest residual between step and prediction;
+/// within [`AMBIGUOUS_COUNTS`] of each other, the interval nearer the measured `gap`.
+/// `end_steps` are the [`step_for`] of `first` and `last`, already computed by the caller.
 fn best_step(
     d0: i64,
     counts_per_period: f32,
     gap: f32,
-    window: core::ops::RangeInclusive<i64>,
+    (first, last): (i64, i64),
+    end_steps: (i64, i64),
     cpr: u16,
 ) -> i64 {
     let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
-    for m in window {
-        let step = step_for(d0, counts_per_period, m, cpr);
+    for m in first..=last {
+        let step = if m == first {
+            end_steps.0
+        } else if m == last {
+            end_steps.1
+        } else {
+            step_for(d0, counts_per_period, m, cpr)
+        };
         let residual = (to_f32(step) - counts_per_period * to_f32(m)).abs();
         let distance = (to_f32(m) - gap).abs();
         let better = match best {
@@ -897,8 +908,9 @@ mod tests {
             prop_assert!((0.0..360.0).contains(&a));
         }
 
-        /// The shortcut (the outermost candidates agree, so all do) takes the step the full
-        /// search takes, for any reading, speed and gap, down to a 14-bit encoder.
+        /// The shortcut (the outermost candidates agree, so all do) and the search with its
+        /// end steps handed in take the step a search computing every candidate afresh takes,
+        /// for any reading, speed and gap, down to a 2-count encoder.
         #[test]
         fn periodic_shortcut_takes_the_step_the_full_search_takes(
             counts_per_rev in prop_oneof![Just(8192u16), Just(16384), 2u16..9000],
@@ -917,13 +929,23 @@ mod tests {
             prop_assume!(counts_per_period.abs() * 4.0 >= nf * 0.25);
             let gap = gap.clamp(1.0, 1.0e6);
             let centre = i64::from(round_clamped(gap));
-            let expected = best_step(
-                wrapped_step(to, from, counts_per_rev),
-                counts_per_period,
-                gap,
-                (centre - 2).max(1)..=centre + 2,
-                counts_per_rev,
-            );
+            let d0 = wrapped_step(to, from, counts_per_rev);
+            let (first, last) = ((centre - 2).max(1), centre + 2);
+            // The search's reference: every candidate's step computed afresh.
+            let mut best: Option<(f32, f32, i64)> = None;
+            for m in first..=last {
+                let step = step_for(d0, counts_per_period, m, counts_per_rev);
+                let residual = (step as f32 - counts_per_period * m as f32).abs();
+                let distance = (m as f32 - gap).abs();
+                let better = best.is_none_or(|(r, d, _)| {
+                    residual + AMBIGUOUS_COUNTS < r
+                        || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
+                });
+                if better {
+                    best = Some((residual, distance, step));
+                }
+            }
+            let expected = best.unwrap().2;
             prop_assert_eq!(e.total_counts() - before, expected);
         }
 

@@ -27,7 +27,9 @@
 //! `Continue` unwraps the first new position against the last one before the outage (the
 //! output moved less than `p_max` meanwhile), `Restart` takes it as it comes, with no wraps
 //! (choose it if the motor may have been power-cycled: its reported position then starts
-//! again from its saved zero).
+//! again from its saved zero). Either way a software homing offset still applies, and a
+//! total-angle target set before the outage stays in force: after a `Restart` set it again,
+//! as it may now lie outside the reachable ±`p_max` (packing clamps it to the range end).
 
 use super::{
     ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,

@@ -37,7 +37,7 @@ const PITCH_GRAVITY_NM: f32 = 0.3;
 
 const fn gm6020(id: u8, zero: Option<u16>) -> DjiMotor {
     let mut config = DjiConfig::default_for(DjiModel::Gm6020Voltage);
-    // Without a zero, angle 0 is raw count 0: the logged angle is then the raw count.
+    // Without a zero, angle 0 is raw count 0.
     config.origin = Origin::Absolute {
         zero_offset_counts: match zero {
             Some(counts) => counts,
@@ -93,12 +93,14 @@ async fn log_state() {
         ticker.next().await;
         let (y, p) = (YAW.state(), PITCH.state());
         if !CALIBRATED {
-            // Zero offset 0: the single-turn angle is the raw count × 360 / 8192.
-            let raw = |deg: Option<f32>| deg.map(|d| (d * 8192.0 / 360.0 + 0.5) as u16 % 8192);
+            // The single-turn angle is (raw count − zero) × 360 / 8192, the zero 0 where unset.
+            let raw = |deg: Option<f32>, zero: Option<u16>| {
+                deg.map(|d| ((d * 8192.0 / 360.0 + 0.5) as u16 + zero.unwrap_or(0)) % 8192)
+            };
             defmt::info!(
                 "raw counts: yaw {} pitch {} (online {}/{})",
-                raw(y.angle_deg),
-                raw(p.angle_deg),
+                raw(y.angle_deg, YAW_ZERO_COUNTS),
+                raw(p.angle_deg, PITCH_ZERO_COUNTS),
                 y.online,
                 p.online
             );

@@ -17,8 +17,8 @@
 //!
 //! GM6020 voltage range: the 2018 manual and DJI's examples give ±30000; newer motor firmware
 //! is reported (third-party) to saturate at ±25000. rc10 defaults to ±25000, which is safe on
-//! both, and lets you raise it up to 30000 ([`DjiConfig::voltage_raw_limit`]). Volts are converted at
-//! 30000 ↔ 24 V (the 2018 manual's full scale at the rated supply; derived).
+//! both, and lets you raise it up to 30000 ([`DjiConfig::voltage_raw_limit`]). Volts are
+//! converted at 30000 ↔ 24 V (the 2018 manual's full scale at the rated supply; derived).
 //!
 //! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
 //! with the same command ID into one frame per tick, and slots no motor uses are sent as zero.
