@@ -1,7 +1,7 @@
 //! A yaw/pitch gimbal on a turning chassis: where the yaw and pitch motors must go so the
 //! gimbal points at a world heading, the short way round, within mechanical limits.
 
-use crate::math::{constrain, wrap_deg_180};
+use crate::math::{constrain, floor, wrap_deg_180, wrap_deg_360};
 
 /// Mechanical limits of a gimbal, degrees.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -11,8 +11,11 @@ pub struct GimbalLimits {
     pub pitch_min_deg: f32,
     /// Highest pitch, degrees.
     pub pitch_max_deg: f32,
-    /// Yaw range relative to the chassis, degrees, for gimbals whose cables do not allow
-    /// endless rotation; `None` for a slip ring (any angle, shortest way).
+    /// Yaw range relative to the chassis, degrees (the yaw motor's multi-turn angle, `(lowest,
+    /// highest)`), for gimbals whose cables do not allow endless rotation; `None` for a slip
+    /// ring (any angle, shortest way). It may be wider than a turn (for example `(-270.0,
+    /// 270.0)`) and need not be centred on 0; reversed bounds are swapped, and a NaN or
+    /// infinite bound leaves that side open.
     pub yaw_range_deg: Option<(f32, f32)>,
 }
 
@@ -21,7 +24,9 @@ pub struct GimbalLimits {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GimbalTarget {
     /// Multi-turn target for the yaw motor relative to the chassis, degrees (use
-    /// `set_target_total_angle_deg`): the nearest angle to where the motor is now.
+    /// `set_target_total_angle_deg`): of the angles that point the gimbal at the target (and
+    /// lie within the yaw range, if it has one), the nearest to where the motor is now. With a
+    /// yaw range that cannot reach the target heading, the nearer end of the range.
     pub yaw_motor_deg: f32,
     /// Pitch target within the limits, degrees.
     pub pitch_deg: f32,
@@ -31,6 +36,10 @@ impl GimbalLimits {
     /// Targets for pointing at `yaw_world_deg` / `pitch_deg` while the chassis faces
     /// `chassis_yaw_deg`, with the yaw motor now at `yaw_motor_now_deg` (its multi-turn angle
     /// relative to the chassis). `None` if any input is NaN or infinite: keep the old targets.
+    ///
+    /// Angles are counter-clockwise positive seen from above, for the chassis yaw and the yaw
+    /// motor alike (mount or configure the yaw motor so that a positive angle turns the gimbal
+    /// left).
     ///
     /// ```
     /// use rc10_core::gimbal::GimbalLimits;
@@ -53,15 +62,43 @@ impl GimbalLimits {
             return None;
         }
         let relative = wrap_deg_180(yaw_world_deg - chassis_yaw_deg);
+        // The angle that points there nearest to the motor's (a slip ring's answer).
+        let nearest = yaw_motor_now_deg + wrap_deg_180(relative - yaw_motor_now_deg);
         let yaw_motor_deg = match self.yaw_range_deg {
-            None => yaw_motor_now_deg + wrap_deg_180(relative - yaw_motor_now_deg),
-            // Limited yaw: the angle within the range (no wrapping through the cable stop).
-            Some((lo, hi)) => constrain(relative, lo, hi),
+            None => nearest,
+            Some((lo, hi)) => within_yaw_range(nearest, lo, hi),
         };
         Some(GimbalTarget {
             yaw_motor_deg,
             pitch_deg: constrain(pitch_deg, self.pitch_min_deg, self.pitch_max_deg),
         })
+    }
+}
+
+/// For a cable-limited yaw: of the angles `nearest + k·360` (all of which point the same
+/// way), the one within `[lo, hi]` nearest to `nearest` (so the motor, already within the
+/// range, never turns through a stop); if the range holds none of them, the end of the range
+/// nearer to the target heading (round the circle).
+fn within_yaw_range(nearest: f32, lo: f32, hi: f32) -> f32 {
+    let open = |bound: f32, side: f32| if bound.is_nan() { side } else { bound };
+    let (lo, hi) = (open(lo, f32::NEG_INFINITY), open(hi, f32::INFINITY));
+    let (lo, hi) = if lo > hi { (hi, lo) } else { (lo, hi) };
+    let candidate = if nearest < lo {
+        // The lowest such angle at or above the bottom: `nearest + 360·⌈(lo − nearest)/360⌉`.
+        nearest - 360.0 * floor((nearest - lo) / 360.0)
+    } else if nearest > hi {
+        // The highest such angle at or below the top.
+        nearest + 360.0 * floor((hi - nearest) / 360.0)
+    } else {
+        return nearest;
+    };
+    if lo <= candidate && candidate <= hi {
+        candidate
+    } else if wrap_deg_360(nearest - hi) <= wrap_deg_360(lo - nearest) {
+        // The heading lies in the gap between `hi` and `lo + 360`: the nearer stop.
+        hi
+    } else {
+        lo
     }
 }
 
@@ -102,6 +139,72 @@ mod tests {
         let t = g.targets(170.0, -45.0, 0.0, 0.0).unwrap();
         assert_eq!(t.yaw_motor_deg, 90.0);
         assert_eq!(t.pitch_deg, -20.0);
+    }
+
+    fn limited(lo: f32, hi: f32) -> GimbalLimits {
+        GimbalLimits {
+            yaw_range_deg: Some((lo, hi)),
+            ..SLIP_RING
+        }
+    }
+
+    #[test]
+    fn a_range_wider_than_a_turn_takes_the_nearest_turn_inside_it() {
+        // Range ±270°, motor at 170°, target 190° left of the chassis (≡ −170°): 190° is 20°
+        // away and inside the range; −170° would swing 340° the other way.
+        let t = limited(-270.0, 270.0)
+            .targets(-170.0, 0.0, 0.0, 170.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 190.0).abs() < 1e-3, "{t:?}");
+        // The same heading from −170°: −170° itself, 0° away.
+        let t = limited(-270.0, 270.0)
+            .targets(-170.0, 0.0, 0.0, -170.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg + 170.0).abs() < 1e-3, "{t:?}");
+        // From 0°, 190° and −170° are both inside: −170° is nearer (170° against 190°).
+        let t = limited(-270.0, 270.0)
+            .targets(190.0, 0.0, 0.0, 0.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg + 170.0).abs() < 1e-3, "{t:?}");
+    }
+
+    #[test]
+    fn a_range_not_centred_on_zero_reaches_headings_behind_its_zero() {
+        // Range 0..350°: −10° is reached as 350°, not held at the 0° stop.
+        let t = limited(0.0, 350.0).targets(-10.0, 0.0, 0.0, 0.0).unwrap();
+        assert!((t.yaw_motor_deg - 350.0).abs() < 1e-3, "{t:?}");
+        // Reversed bounds mean the same range.
+        let t = limited(350.0, 0.0).targets(-10.0, 0.0, 0.0, 0.0).unwrap();
+        assert!((t.yaw_motor_deg - 350.0).abs() < 1e-3, "{t:?}");
+    }
+
+    #[test]
+    fn an_unreachable_heading_goes_to_the_nearer_stop_round_the_circle() {
+        // Range −170..0°, target 150°: past the 0° stop by 150°, past the −170° stop (≡ 190°)
+        // by 40° round the other way: the gimbal waits at −170°.
+        let t = limited(-170.0, 0.0)
+            .targets(150.0, 0.0, 0.0, -10.0)
+            .unwrap();
+        assert_eq!(t.yaw_motor_deg, -170.0);
+        // Target 20°: 20° past the 0° stop, 170° short of the other: 0°.
+        let t = limited(-170.0, 0.0)
+            .targets(20.0, 0.0, 0.0, -100.0)
+            .unwrap();
+        assert_eq!(t.yaw_motor_deg, 0.0);
+    }
+
+    #[test]
+    fn an_open_side_of_the_range_allows_any_angle_on_that_side() {
+        // Top open: from 300°, heading 10° is 370° (70° away, above the 0° bottom).
+        let t = limited(0.0, f32::NAN)
+            .targets(10.0, 0.0, 0.0, 300.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 370.0).abs() < 1e-3, "{t:?}");
+        // Bottom open: from 10°, heading −100° with the top at 0°: −100° itself.
+        let t = limited(f32::NAN, 0.0)
+            .targets(-100.0, 0.0, 0.0, 10.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg + 100.0).abs() < 1e-3, "{t:?}");
     }
 
     #[test]
