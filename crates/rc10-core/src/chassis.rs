@@ -81,6 +81,8 @@ pub enum ChassisError {
     InvalidDimension,
     /// The wheels cannot determine the twist (e.g. all omni wheels parallel).
     Singular,
+    /// A wheel's sign is not +1 or −1.
+    InvalidSign,
 }
 
 impl fmt::Display for ChassisError {
@@ -88,6 +90,7 @@ impl fmt::Display for ChassisError {
         f.write_str(match self {
             Self::InvalidDimension => "chassis dimension not finite and positive",
             Self::Singular => "wheel arrangement cannot determine the chassis twist",
+            Self::InvalidSign => "wheel sign is not +1 or -1",
         })
     }
 }
@@ -177,7 +180,8 @@ pub struct LinearChassis<const N: usize> {
 
 impl<const N: usize> LinearChassis<N> {
     /// A chassis from explicit rows `[kx, ky, kω]` (rim speed = kx·vx + ky·vy + kω·ω),
-    /// wheel radius and per-wheel signs.
+    /// wheel radius and per-wheel signs (+1, or −1 for a wheel whose motor turns the other
+    /// way for a positive rim speed; anything else is [`ChassisError::InvalidSign`]).
     #[allow(
         clippy::arithmetic_side_effects,
         reason = "nalgebra f32 product: no integer overflow"
@@ -188,8 +192,12 @@ impl<const N: usize> LinearChassis<N> {
         signs: [f32; N],
     ) -> Result<Self, ChassisError> {
         let r = positive(wheel_radius_m)?;
-        if rows.iter().flatten().chain(&signs).any(|x| !x.is_finite()) {
+        if rows.iter().flatten().any(|x| !x.is_finite()) {
             return Err(ChassisError::InvalidDimension);
+        }
+        // Odometry undoes a sign by multiplying by it again: only ±1 are their own inverse.
+        if signs.iter().any(|&s| s != 1.0 && s != -1.0) {
+            return Err(ChassisError::InvalidSign);
         }
         let m = SMatrix::<f32, N, 3>::from_fn(|i, j| {
             rows.get(i)
@@ -207,7 +215,8 @@ impl<const N: usize> LinearChassis<N> {
         })
     }
 
-    /// Output-shaft rpm of every wheel for `twist`. A non-finite twist gives all zeros.
+    /// Output-shaft rpm of every wheel for `twist`. A non-finite twist, or one so large that
+    /// a wheel's rpm overflows `f32`, gives all zeros.
     #[allow(
         clippy::arithmetic_side_effects,
         reason = "nalgebra f32 product: no integer overflow"
@@ -221,6 +230,9 @@ impl<const N: usize> LinearChassis<N> {
         let rim = self.rows * v;
         for ((o, rim), sign) in out.iter_mut().zip(rim.iter()).zip(&self.signs) {
             *o = sign * rim / self.wheel_radius_m * RAD_S_TO_RPM;
+        }
+        if out.iter().any(|w| !w.is_finite()) {
+            return [0.0; N];
         }
         out
     }
@@ -455,7 +467,10 @@ pub struct TwistLimiter {
 }
 
 impl TwistLimiter {
-    /// Limits per axis: m/s², m/s², rad/s² (taken by magnitude; NaN freezes that axis).
+    /// Limits per axis: m/s², m/s², rad/s² (taken by magnitude; NaN counts as 0). The whole
+    /// change is scaled by one factor, so a zero limit on one axis holds *every* axis while
+    /// that axis's target differs from the output (the direction of the change is kept);
+    /// an infinite limit leaves its axis unlimited.
     pub fn new(max_accel: Twist) -> Self {
         let clean = |x: f32| if x.is_nan() { 0.0 } else { x.abs() };
         Self {
@@ -490,11 +505,16 @@ impl TwistLimiter {
             .filter(|(d, _)| d.abs() > 0.0)
             .map(|(d, l)| l / d.abs())
             .fold(1.0f32, f32::min);
-        self.output = Twist::new(
-            self.output.vx_m_s + k * d[0],
-            self.output.vy_m_s + k * d[1],
-            self.output.omega_rad_s + k * d[2],
-        );
+        self.output = if k >= 1.0 {
+            // Within reach: the target itself (`output + d` can round beside it).
+            target
+        } else {
+            Twist::new(
+                self.output.vx_m_s + k * d[0],
+                self.output.vy_m_s + k * d[1],
+                self.output.omega_rad_s + k * d[2],
+            )
+        };
         self.output
     }
 
@@ -660,6 +680,45 @@ mod tests {
         }
         assert_eq!(out, Twist::new(2.0, 1.0, 0.0));
         assert_eq!(l.update(Twist::new(f32::NAN, 0.0, 0.0), 0.1), out);
+    }
+
+    #[test]
+    fn limiter_lands_exactly_and_a_zero_limit_holds_every_axis() {
+        // Within one step, the output is the target itself: 0.7 + (−0.001 − 0.7) in f32 is
+        // not −0.001.
+        let mut l = TwistLimiter::new(Twist::new(10.0, 10.0, 10.0));
+        l.reset(Twist::new(0.7, 0.0, 0.0));
+        assert_eq!(l.update(Twist::new(-0.001, 0.0, 0.0), 1.0).vx_m_s, -0.001);
+        // A zero (or NaN) rotation limit: the whole change waits while ω must change, as
+        // the docs say; a change that leaves ω alone goes ahead.
+        let mut l = TwistLimiter::new(Twist::new(1.0, 1.0, f32::NAN));
+        assert_eq!(l.update(Twist::new(1.0, 0.0, 0.1), 0.1), Twist::ZERO);
+        let out = l.update(Twist::new(1.0, 0.0, 0.0), 0.1);
+        assert!((out.vx_m_s - 0.1).abs() < 1e-6, "{out:?}");
+    }
+
+    #[test]
+    fn wheel_signs_other_than_plus_or_minus_one_are_refused() {
+        let rows = [[1.0, 0.0, 0.2], [0.0, 1.0, 0.2], [-1.0, 0.0, 0.2]];
+        for bad in [0.0, 0.5, -2.0, f32::NAN] {
+            assert_eq!(
+                LinearChassis::<3>::from_rows(rows, 0.05, [1.0, bad, -1.0]).unwrap_err(),
+                ChassisError::InvalidSign
+            );
+        }
+        assert!(LinearChassis::<3>::from_rows(rows, 0.05, [1.0, -1.0, -1.0]).is_ok());
+    }
+
+    #[test]
+    fn a_twist_too_large_for_f32_wheel_speeds_gives_zeros() {
+        // 1e37 m/s on a 76 mm wheel is about 1.3e39 rpm: beyond f32, so no wheel gets an
+        // infinity (or, scaled to a limit, a NaN).
+        let c = rm_chassis();
+        assert_eq!(c.wheel_rpm(Twist::new(1e37, 0.0, 0.0)), [0.0; 4]);
+        assert_eq!(
+            c.wheel_rpm_limited(Twist::new(1e37, 0.0, 0.0), 500.0),
+            [0.0; 4]
+        );
     }
 
     #[test]

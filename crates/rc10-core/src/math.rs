@@ -231,8 +231,9 @@ pub fn angle_diff_deg(from_deg: f32, to_deg: f32) -> f32 {
 
 /// Moves `current` towards `target` by at most `max_step` (RC10_LIB `ramp`).
 ///
-/// `max_step` is taken by magnitude. A NaN `target` leaves `current` unchanged; a NaN
-/// `current` jumps to `target` (there is nothing to ramp from). See [`crate::filter::Ramp`]
+/// `max_step` is taken by magnitude. Within one step of `target` the result is `target`
+/// exactly (never a rounding short of or past it). A NaN `target` leaves `current`
+/// unchanged; a NaN `current` jumps to `target` (there is nothing to ramp from). See [`crate::filter::Ramp`]
 /// for a stateful limiter with a rate in units per second.
 ///
 /// ```
@@ -254,7 +255,20 @@ pub fn ramp(current: f32, target: f32, max_step: f32) -> f32 {
     } else {
         max_step.abs()
     };
-    current + constrain(target - current, -step, step)
+    let delta = target - current;
+    // Within one step: the target itself (`current + delta` can round past it when the two
+    // differ in magnitude or sign). A NaN `delta` (both the same infinity) is "there".
+    if !(delta.abs() > step) {
+        return target;
+    }
+    // One step towards it, never past it by rounding.
+    if delta > 0.0 {
+        let next = current + step;
+        if next > target { target } else { next }
+    } else {
+        let next = current - step;
+        if next < target { target } else { next }
+    }
 }
 
 #[cfg(test)]
@@ -372,7 +386,37 @@ mod tests {
         assert_eq!(ramp(f32::NAN, 7.0, 1.0), 7.0);
     }
 
+    #[test]
+    fn ramp_lands_exactly_on_a_target_within_one_step() {
+        // In f32, 1e8 + (1.0 − 1e8) is 0.0 (1.0 − 1e8 rounds to −1e8), and 0.7 + (−0.001 − 0.7)
+        // is not −0.001: the last step must give the target itself.
+        assert_eq!(ramp(1e8, 1.0, f32::INFINITY), 1.0);
+        assert_eq!(ramp(0.7, -0.001, f32::INFINITY), -0.001);
+        assert_eq!(ramp(0.7, -0.001, 1.0), -0.001);
+        // Both at the same infinity: already there.
+        assert_eq!(
+            ramp(f32::INFINITY, f32::INFINITY, f32::INFINITY),
+            f32::INFINITY
+        );
+        // A step short of it stays short, on either side.
+        assert_eq!(ramp(1e8, 1.0, 5e7), 5e7);
+        assert_eq!(ramp(-2.0, 2.0, 1.5), -0.5);
+    }
+
     proptest! {
+        #[test]
+        fn ramp_never_passes_the_target_and_moves_at_most_one_step(
+            current in -1.0e9f32..1.0e9, target in -1.0e9f32..1.0e9, step in 0.0f32..1.0e9,
+        ) {
+            let next = ramp(current, target, step);
+            let (lo, hi) = if current <= target { (current, target) } else { (target, current) };
+            prop_assert!(lo <= next && next <= hi, "{current} -> {target} by {step}: {next}");
+            // Exactly the target once within a step (compared in f64, exact for f32 values).
+            if (f64::from(target) - f64::from(current)).abs() <= f64::from(step) {
+                prop_assert_eq!(next, target);
+            }
+        }
+
         #[test]
         fn wrap_signed_stays_in_half_open_range(v in -1.0e6f32..1.0e6) {
             let w = wrap_deg_180(v);

@@ -151,6 +151,7 @@ fn device_and_algorithm_errors_name_the_bad_setting() {
     says(EncoderError::OutOfRange { raw: 9000 }, &["9000"]);
     says(ChassisError::InvalidDimension, &["dimension"]);
     says(ChassisError::Singular, &["twist"]);
+    says(ChassisError::InvalidSign, &["sign"]);
 }
 
 #[test]
