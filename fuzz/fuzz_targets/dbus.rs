@@ -7,7 +7,8 @@
 //! Invariants (DR16 protocol: four 11-bit sticks little-endian in bits 0–43, right switch
 //! bits 44–45, left switch 46–47, switch values 1 up / 3 middle / 2 down, mouse x/y/z i16 LE,
 //! buttons, keys u16 LE, wheel): no panic; a frame is accepted exactly when it has 18 bytes,
-//! every stick is within 364–1684 and both switches are valid, and then decodes to those
+//! every stick is within 324–1724 (±700 around 1024, the margin DJI's examples allow) and
+//! both switches are valid, and then decodes to those
 //! fields; normalised sticks are finite and within [-1, 1] for any deadband; a frame
 //! completed from a stream is the last 18 bytes with no gap of silence inside; the signal is
 //! the last valid frame until 100 ms after it, then neutral.
@@ -51,7 +52,7 @@ fn decode(b: &[u8]) -> Option<DbusFrame> {
     }
     let stick = |i: u32| ((bits >> (11 * i)) & 0x7FF) as u16;
     let sticks = [stick(0), stick(1), stick(2), stick(3)];
-    if sticks.iter().any(|s| !(364..=1684).contains(s)) {
+    if sticks.iter().any(|s| !(324..=1724).contains(s)) {
         return None;
     }
     let switch = |v: u64| match v & 0b11 {

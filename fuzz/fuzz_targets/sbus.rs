@@ -5,12 +5,13 @@
 //! stream (see `rc10_fuzz::remote::run_stream`).
 //!
 //! Invariants (SBUS: header 0x0F, sixteen 11-bit channels LSB first in bytes 1–22, flags in
-//! byte 23 (bit 0 ch17, 1 ch18, 2 frame lost, 3 failsafe), footer 0x00 or SBUS2's xx04): no
+//! byte 23 (bit 0 ch17, 1 ch18, 2 frame lost, 3 failsafe), footer 0x00 or SBUS2's 0x04,
+//! 0x14, 0x24, 0x34): no
 //! panic; a frame is accepted exactly when it has 25 bytes, the header and a valid footer,
 //! and decodes to those fields; normalised channels are finite and within [-1, 1] for any
 //! deadband; a frame completed from a stream is the last 25 bytes with no gap of silence
-//! inside; the signal is the last valid frame until 100 ms after it, then neutral, and
-//! neutral at once after a frame with the failsafe flag.
+//! inside; the signal is the last valid frame until 100 ms after the last one not flagged
+//! "frame lost", then neutral, and neutral at once after a frame with the failsafe flag.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -38,7 +39,7 @@ fuzz_target!(|data: &[u8]| {
 /// The SBUS frame layout, decoded from the protocol one bit at a time.
 fn decode(b: &[u8]) -> Option<SbusFrame> {
     let b: &[u8; 25] = b.try_into().ok()?;
-    if b[0] != 0x0F || !(b[24] == 0x00 || b[24] & 0x0F == 0x04) {
+    if b[0] != 0x0F || ![0x00, 0x04, 0x14, 0x24, 0x34].contains(&b[24]) {
         return None;
     }
     let mut channels = [0u16; 16];

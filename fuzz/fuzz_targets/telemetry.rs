@@ -2,12 +2,14 @@
 //! precision and buffer size. rc10-core's telemetry parses no input (it only encodes), so this
 //! target checks the encoders against the two formats.
 //!
-//! Invariants: no panic; JustFloat is the values' little-endian bits then 00 00 80 7F, or
+//! Invariants: no panic; JustFloat is the values' little-endian bits (+inf, whose bits are
+//! the tail, as f32::MAX) then 00 00 80 7F, and no value's bytes equal the tail, or
 //! `BufferTooSmall` with the exact size when the buffer is smaller; FireWater is
 //! `prefix:v1,...,vn\n` (no `prefix:` when empty) within the buffer, each value written with
 //! the requested decimals (at most 65535, the formatter's limit) and reading back to the value
-//! within half a unit of the last place, or as nan / inf / -inf; or `BufferTooSmall` with more
-//! than the buffer's size. `Channels` stores and encodes what was set.
+//! within half a unit of the last place, or as nan / inf / -inf; or `BufferTooSmall` with the
+//! exact size of the line (more than the buffer's, and the line fits a buffer of that size).
+//! `Channels` stores and encodes what was set.
 #![no_main]
 
 use arbitrary::{Arbitrary, Unstructured};
@@ -38,7 +40,9 @@ fuzz_target!(|data: &[u8]| {
         Ok(written) => {
             assert_eq!(written, needed);
             for (chunk, v) in out[..4 * n].chunks(4).zip(&values) {
-                assert_eq!(chunk, v.to_le_bytes(), "value {v}");
+                let sent = if *v == f32::INFINITY { f32::MAX } else { *v };
+                assert_eq!(chunk, sent.to_le_bytes(), "value {v}");
+                assert_ne!(chunk, JUSTFLOAT_TAIL, "a value that reads as the tail");
             }
             assert_eq!(out[4 * n..needed], JUSTFLOAT_TAIL);
         }
@@ -85,11 +89,19 @@ fuzz_target!(|data: &[u8]| {
                 }
             }
         }
-        Err(e) => assert!(
-            e.needed > size,
-            "BufferTooSmall({}) with {size} bytes",
-            e.needed
-        ),
+        Err(e) => {
+            assert!(
+                e.needed > size,
+                "BufferTooSmall({}) with {size} bytes",
+                e.needed
+            );
+            let mut exact = vec![0u8; e.needed];
+            assert_eq!(
+                firewater(&prefix, &values, decimals, &mut exact),
+                Ok(e.needed),
+                "the size BufferTooSmall names"
+            );
+        }
     }
 
     // Channels.
@@ -105,7 +117,8 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(written) = SCOPE.encode_justfloat(&mut out) {
         assert_eq!(written, 16);
         for (chunk, v) in out[..12].chunks(4).zip(&snapshot) {
-            assert_eq!(chunk, v.to_bits().to_le_bytes());
+            let sent = if *v == f32::INFINITY { f32::MAX } else { *v };
+            assert_eq!(chunk, sent.to_bits().to_le_bytes());
         }
     }
     assert_eq!(SCOPE.get(3), None);

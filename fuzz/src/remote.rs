@@ -31,6 +31,14 @@ impl<F: Copy + PartialEq + Debug> LinkOracle<F> {
         self.last = Some((now, Some(frame)));
     }
 
+    /// A valid frame flagged as repeating old values: its values while the link is live,
+    /// without restarting the timeout.
+    pub fn hold(&mut self, frame: F) {
+        if let Some((t, Some(_))) = self.last {
+            self.last = Some((t, Some(frame)));
+        }
+    }
+
     /// The receiver reported failsafe at `now`: neutral at once.
     pub fn failsafe(&mut self, now: u64) {
         self.last = Some((now, None));
@@ -129,6 +137,8 @@ pub fn run_stream<F, const N: usize>(
                     check_frame(f);
                     if failsafe(f) {
                         oracle.failsafe(now);
+                    } else if f.frame_lost() {
+                        oracle.hold(*f);
                     } else {
                         oracle.accept(*f, now);
                     }

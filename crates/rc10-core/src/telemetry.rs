@@ -26,7 +26,7 @@ pub const MAX_DECIMALS: usize = u16::MAX as usize;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BufferTooSmall {
-    /// Bytes the frame needs (for JustFloat, exact; for FireWater, at least).
+    /// Bytes the frame needs, exactly.
     pub needed: usize,
 }
 
@@ -44,6 +44,10 @@ impl core::error::Error for BufferTooSmall {}
 
 /// Encodes `values` as one JustFloat frame (little-endian f32s, then the tail) into `out`;
 /// returns the bytes written.
+///
+/// `+inf` is sent as [`f32::MAX`]: its own bit pattern is the frame tail, so VOFA+ would end
+/// the frame at it and shift every later channel. Every other value, NaN and `-inf` included,
+/// is sent bit for bit.
 pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
     // 4 bytes per value; a slice never spans more than isize::MAX bytes, so the sum does not
     // saturate.
@@ -52,6 +56,7 @@ pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall
     let frame = out.get_mut(..needed).ok_or(BufferTooSmall { needed })?;
     let (data, tail) = frame.split_at_mut(data_len);
     for (chunk, v) in data.as_chunks_mut::<4>().0.iter_mut().zip(values) {
+        let v = if *v == f32::INFINITY { f32::MAX } else { *v };
         chunk.copy_from_slice(&v.to_le_bytes());
     }
     tail.copy_from_slice(&JUSTFLOAT_TAIL);
@@ -60,8 +65,9 @@ pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall
 
 /// Encodes `values` as one FireWater line, `prefix:v1,v2,...\n` (no `prefix:` if `prefix` is
 /// empty), with `decimals` digits after the point (at most [`MAX_DECIMALS`]; more are taken
-/// as that); returns the bytes written. NaN and infinity are written as `nan` / `inf`, which
-/// VOFA+ shows as gaps rather than misreading them.
+/// as that); returns the bytes written. NaN and infinities are written as `nan`, `inf` and
+/// `-inf`. The prefix is written as it is: it must not contain `:`, `,` or a line break,
+/// which would split the line differently in VOFA+.
 pub fn firewater(
     prefix: &str,
     values: &[f32],
@@ -70,57 +76,62 @@ pub fn firewater(
 ) -> Result<usize, BufferTooSmall> {
     // Rust's formatter panics on a precision beyond u16::MAX.
     let decimals = decimals.min(MAX_DECIMALS);
-    let mut w = SliceWriter {
-        out,
-        len: 0,
-        overflow: false,
-    };
+    let mut w = SliceWriter { out, len: 0 };
+    if firewater_line(&mut w, prefix, values, decimals).is_ok() {
+        return Ok(w.len);
+    }
+    // Too long: the exact length, from the same line written to a counter.
+    let mut count = Counter(0);
+    let _ = firewater_line(&mut count, prefix, values, decimals);
+    Err(BufferTooSmall { needed: count.0 })
+}
+
+/// Writes one FireWater line; stops at the first error of `w`.
+fn firewater_line(
+    w: &mut impl fmt::Write,
+    prefix: &str,
+    values: &[f32],
+    decimals: usize,
+) -> fmt::Result {
     if !prefix.is_empty() {
-        let _ = write!(w, "{prefix}:");
+        write!(w, "{prefix}:")?;
     }
     for (i, v) in values.iter().enumerate() {
         let sep = if i == 0 { "" } else { "," };
-        let _ = if v.is_finite() {
-            write!(w, "{sep}{v:.decimals$}")
+        if v.is_finite() {
+            write!(w, "{sep}{v:.decimals$}")?;
         } else if v.is_nan() {
-            write!(w, "{sep}nan")
+            write!(w, "{sep}nan")?;
         } else {
-            write!(w, "{sep}{}inf", if *v < 0.0 { "-" } else { "" })
-        };
+            write!(w, "{sep}{}inf", if *v < 0.0 { "-" } else { "" })?;
+        }
     }
-    let _ = w.write_str("\n");
-    if w.overflow {
-        // `len` kept counting past the end of `out`.
-        Err(BufferTooSmall {
-            needed: w.len.saturating_add(1),
-        })
-    } else {
-        Ok(w.len)
+    w.write_str("\n")
+}
+
+/// Counts the bytes written to it (saturating).
+struct Counter(usize);
+
+impl fmt::Write for Counter {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        self.0 = self.0.saturating_add(s.len());
+        Ok(())
     }
 }
 
+/// Writes into a byte slice; fails (writing nothing more) once a piece does not fit.
 struct SliceWriter<'a> {
     out: &'a mut [u8],
     len: usize,
-    overflow: bool,
 }
 
 impl fmt::Write for SliceWriter<'_> {
     fn write_str(&mut self, s: &str) -> fmt::Result {
-        // Saturates (a line longer than memory is reported as needing usize::MAX bytes).
-        let end = self.len.saturating_add(s.len());
-        match self.out.get_mut(self.len..end) {
-            Some(dst) if !self.overflow => {
-                dst.copy_from_slice(s.as_bytes());
-                self.len = end;
-                Ok(())
-            }
-            _ => {
-                self.overflow = true;
-                self.len = end;
-                Err(fmt::Error)
-            }
-        }
+        let end = self.len.checked_add(s.len()).ok_or(fmt::Error)?;
+        let dst = self.out.get_mut(self.len..end).ok_or(fmt::Error)?;
+        dst.copy_from_slice(s.as_bytes());
+        self.len = end;
+        Ok(())
     }
 }
 
@@ -236,7 +247,46 @@ mod tests {
         let needed = firewater("", &[1.0], usize::MAX, &mut small)
             .unwrap_err()
             .needed;
-        assert!(needed > 8, "needed {needed}"); // at least (formatting stops at the error)
+        assert_eq!(needed, MAX_DECIMALS + 3);
+    }
+
+    #[test]
+    fn firewater_reports_exactly_the_bytes_a_line_needs() {
+        // "1\n" is 2 bytes; "x:123456.000\n" is 13; "a:1.5,-inf,nan\n" is 15.
+        assert_eq!(
+            firewater("", &[1.0], 0, &mut [0u8; 1]),
+            Err(BufferTooSmall { needed: 2 })
+        );
+        assert_eq!(
+            firewater("x", &[123456.0], 3, &mut [0u8; 8]),
+            Err(BufferTooSmall { needed: 13 })
+        );
+        let mut buf = [0u8; 15];
+        assert_eq!(
+            firewater("a", &[1.5, f32::NEG_INFINITY, f32::NAN], 1, &mut buf[..14]),
+            Err(BufferTooSmall { needed: 15 })
+        );
+        assert_eq!(
+            firewater("a", &[1.5, f32::NEG_INFINITY, f32::NAN], 1, &mut buf),
+            Ok(15)
+        );
+        assert_eq!(&buf, b"a:1.5,-inf,nan\n");
+    }
+
+    #[test]
+    fn justfloat_sends_plus_infinity_as_the_largest_float_not_the_tail() {
+        // +inf is 0x7F800000, bytes 00 00 80 7F: the tail itself. f32::MAX is 0x7F7FFFFF.
+        let mut buf = [0u8; 12];
+        assert_eq!(
+            justfloat(&[f32::INFINITY, f32::NEG_INFINITY], &mut buf),
+            Ok(12)
+        );
+        assert_eq!(
+            buf,
+            [
+                0xFF, 0xFF, 0x7F, 0x7F, 0x00, 0x00, 0x80, 0xFF, 0x00, 0x00, 0x80, 0x7F
+            ]
+        );
     }
 
     #[test]

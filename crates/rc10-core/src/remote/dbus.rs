@@ -2,7 +2,8 @@
 //! 8E1, inverted (DJI RoboMaster development-board examples).
 //!
 //! Layout (little-endian bit fields): channels 0–3 are 11 bits each from byte 0 (right stick
-//! x, right stick y, left stick x, left stick y; 364…1684, centre 1024); byte 5 bits 4–5 the
+//! x, right stick y, left stick x, left stick y; 364…1684, centre 1024, accepted up to ±700
+//! around the centre as DJI's own examples do); byte 5 bits 4–5 the
 //! right switch, bits 6–7 the left switch (1 up, 3 middle, 2 down); bytes 6–11 mouse x, y, z
 //! (i16); bytes 12–13 mouse buttons; bytes 14–15 the keyboard bit mask; bytes 16–17 the wheel
 //! (11 bits, on newer receivers).
@@ -10,12 +11,16 @@
 use super::{FrameReceiver, ReceiverFrame, normalize};
 use core::fmt;
 
-/// Raw stick range of the DR16.
+/// Raw stick minimum of the DR16 (full deflection, −660 from the centre).
 pub const STICK_MIN: u16 = 364;
 /// Raw stick centre.
 pub const STICK_CENTER: u16 = 1024;
-/// Raw stick maximum.
+/// Raw stick maximum (full deflection, +660 from the centre).
 pub const STICK_MAX: u16 = 1684;
+/// How far from the centre a stick value may read before the frame is rejected as corrupt:
+/// 700, the margin DJI's RoboMaster development-board examples allow, because a transmitter
+/// can read a little past ±660 (beyond ±660 a stick reads as full scale).
+pub const STICK_TOLERANCE: u16 = 700;
 /// Bytes in a frame.
 pub const FRAME_LEN: usize = 18;
 
@@ -91,7 +96,7 @@ impl Keys {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DbusFrame {
-    /// Raw sticks: right x, right y, left x, left y (364…1684).
+    /// Raw sticks: right x, right y, left x, left y (364…1684; up to 324…1724 accepted).
     pub sticks: [u16; 4],
     /// Left switch.
     pub left_switch: Switch,
@@ -155,7 +160,8 @@ impl DbusFrame {
             (w(b2) >> 6 | w(b3) << 2 | w(b4) << 10) & 0x7FF,
             (w(b4) >> 1 | w(b5) << 7) & 0x7FF,
         ];
-        if sticks.iter().any(|s| !(STICK_MIN..=STICK_MAX).contains(s)) {
+        let accepted = STICK_CENTER - STICK_TOLERANCE..=STICK_CENTER + STICK_TOLERANCE;
+        if sticks.iter().any(|s| !accepted.contains(s)) {
             return Err(DbusError::StickOutOfRange);
         }
         let right_switch = Switch::from_raw((b5 >> 4) & 0x03).ok_or(DbusError::InvalidSwitch)?;
@@ -190,7 +196,7 @@ impl DbusFrame {
 pub enum DbusError {
     /// Not 18 bytes.
     WrongLength(usize),
-    /// A stick value outside 364…1684.
+    /// A stick value more than [`STICK_TOLERANCE`] from the centre (outside 324…1724).
     StickOutOfRange,
     /// A switch value outside {1, 2, 3}.
     InvalidSwitch,
@@ -288,6 +294,24 @@ mod tests {
             (f.left_switch, f.right_switch),
             (Switch::Middle, Switch::Middle)
         );
+    }
+
+    #[test]
+    fn sticks_a_little_past_full_scale_are_accepted_and_read_as_full_scale() {
+        // DJI's examples reject a channel only beyond ±700 from 1024: 1724 and 324 are the
+        // last values kept, 1725 and 323 the first refused.
+        let f = DbusFrame::parse(&encode([1724, 324, 1700, 1024], 1, 1, [0; 3], 0)).unwrap();
+        assert_eq!(f.sticks, [1724, 324, 1700, 1024]);
+        assert_eq!(
+            (f.stick(0, 0.0), f.stick(1, 0.0), f.stick(2, 0.0)),
+            (1.0, -1.0, 1.0)
+        );
+        for bad in [[1725, 1024, 1024, 1024], [1024, 1024, 1024, 323]] {
+            assert_eq!(
+                DbusFrame::parse(&encode(bad, 1, 1, [0; 3], 0)),
+                Err(DbusError::StickOutOfRange)
+            );
+        }
     }
 
     #[test]

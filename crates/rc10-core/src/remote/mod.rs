@@ -17,8 +17,9 @@ use crate::time::{Duration, Instant};
 pub struct Signal<T> {
     /// The last valid frame, or the neutral value while the link is lost.
     pub value: T,
-    /// Whether the link is lost (no valid frame within the timeout, or the receiver itself
-    /// reported failsafe).
+    /// Whether the link is lost (no fresh valid frame within the timeout, or the receiver
+    /// itself reported failsafe). A frame the receiver flags as a repeat of old values (SBUS
+    /// "frame lost") is not fresh.
     pub lost: bool,
 }
 
@@ -64,6 +65,18 @@ impl<T: Copy> Link<T> {
         self.last = frame;
         self.last_valid = Some(now);
         self.failsafe = false;
+        self.frames = self.frames.wrapping_add(1);
+    }
+
+    /// Records a valid frame that only repeats old values (the receiver missed the
+    /// transmitter's frame: SBUS "frame lost"). Its values are kept while the link is live,
+    /// but it does not restart the timeout: a receiver that goes on repeating after the
+    /// transmitter is gone (as many do until their own failsafe delay, or for ever in "hold"
+    /// mode) does not keep the robot acting on stale commands.
+    pub fn hold(&mut self, frame: T) {
+        if !self.failsafe && self.last_valid.is_some() {
+            self.last = frame;
+        }
         self.frames = self.frames.wrapping_add(1);
     }
 
@@ -231,17 +244,17 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
     }
 
     /// Feeds a whole frame received at `now`. A frame in which the receiver reports failsafe
-    /// sends the outputs neutral at once.
+    /// sends the outputs neutral at once; one it flags as a repeat of old values
+    /// ([`ReceiverFrame::frame_lost`]) does not restart the timeout ([`Link::hold`]).
     pub fn push_frame(&mut self, bytes: &[u8], now: Instant) -> Result<F, F::Error> {
         let parsed = F::parse(bytes);
         match &parsed {
             Ok(frame) if frame.failsafe() => self.link.failsafe(now),
-            Ok(frame) => {
-                if frame.frame_lost() {
-                    self.frames_lost = self.frames_lost.wrapping_add(1);
-                }
-                self.link.accept(*frame, now);
+            Ok(frame) if frame.frame_lost() => {
+                self.frames_lost = self.frames_lost.wrapping_add(1);
+                self.link.hold(*frame);
             }
+            Ok(frame) => self.link.accept(*frame, now),
             Err(_) => self.link.reject(),
         }
         parsed

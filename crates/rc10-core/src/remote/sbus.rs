@@ -3,7 +3,16 @@
 //! Layout: byte 0 is the header 0x0F; bytes 1–22 hold 16 channels of 11 bits, least
 //! significant bit first; byte 23 holds flags (bit 0 digital channel 17, bit 1 channel 18,
 //! bit 2 frame lost, bit 3 failsafe); byte 24 is the footer (0x00, or 0x04/0x14/0x24/0x34 on
-//! receivers that interleave telemetry slots). Channel values run about 172…1811, centre 992.
+//! receivers that interleave telemetry slots).
+//!
+//! Scaling: [`SbusFrame::channel`] uses FrSky's (OpenTX/EdgeTX) convention, ±100 % at
+//! 172…1811 around 992. Futaba receivers centre near 1024 with a different span: use
+//! [`SbusFrame::channel_scaled`] with your receiver's centre and span (read them from
+//! `channels` with the sticks centred and at full throw).
+//!
+//! A frame flagged "frame lost" repeats the last values; it does not keep the link alive
+//! (see [`Link::hold`](super::Link::hold)), so a receiver that repeats after the transmitter
+//! is gone still goes neutral after the timeout.
 
 use super::{FrameReceiver, ReceiverFrame, normalize};
 use core::fmt;
@@ -12,9 +21,9 @@ use core::fmt;
 pub const FRAME_LEN: usize = 25;
 /// Header byte.
 pub const HEADER: u8 = 0x0F;
-/// Usual channel centre.
+/// Channel centre, FrSky convention (1500 µs).
 pub const CENTER: u16 = 992;
-/// Usual distance from centre to full scale.
+/// Distance from centre to full scale (±100 %), FrSky convention.
 pub const HALF_RANGE: u16 = 820;
 
 /// One decoded SBUS frame.
@@ -52,7 +61,8 @@ impl SbusFrame {
             return Err(SbusError::BadHeader(b[0]));
         }
         let footer = b[24];
-        if footer != 0x00 && footer & 0x0F != 0x04 {
+        // 0x00, or an SBUS2 telemetry-slot footer 0x04 / 0x14 / 0x24 / 0x34.
+        if footer != 0x00 && footer & 0xCF != 0x04 {
             return Err(SbusError::BadFooter(footer));
         }
         let mut channels = [0u16; 16];
@@ -75,11 +85,18 @@ impl SbusFrame {
         })
     }
 
-    /// Channel `i` (0-based) in −1…1 around 992 with `deadband` (fraction of full scale).
+    /// Channel `i` (0-based) in −1…1 around 992 with `deadband` (fraction of full scale),
+    /// FrSky scaling ([`CENTER`], [`HALF_RANGE`]).
     pub fn channel(&self, i: usize, deadband: f32) -> f32 {
+        self.channel_scaled(i, CENTER, HALF_RANGE, deadband)
+    }
+
+    /// Channel `i` (0-based) in −1…1 for a receiver whose centre is `center` and whose full
+    /// scale is `half_range` counts from it, with `deadband` (fraction of full scale).
+    pub fn channel_scaled(&self, i: usize, center: u16, half_range: u16, deadband: f32) -> f32 {
         self.channels
             .get(i)
-            .map_or(0.0, |raw| normalize(*raw, CENTER, HALF_RANGE, deadband))
+            .map_or(0.0, |raw| normalize(*raw, center, half_range, deadband))
     }
 }
 
@@ -177,6 +194,63 @@ mod tests {
             SbusFrame::parse(&bad[..24]),
             Err(SbusError::WrongLength(24))
         );
+    }
+
+    #[test]
+    fn only_the_sbus2_slot_footers_are_accepted() {
+        let ch = [992; 16];
+        for ok in [0x00, 0x04, 0x14, 0x24, 0x34] {
+            assert!(SbusFrame::parse(&encode(ch, 0, ok)).is_ok(), "{ok:#04x}");
+        }
+        for bad in [0x44, 0x54, 0x84, 0xF4, 0x01, 0x0F] {
+            assert_eq!(
+                SbusFrame::parse(&encode(ch, 0, bad)),
+                Err(SbusError::BadFooter(bad))
+            );
+        }
+    }
+
+    #[test]
+    fn futaba_scaling_centres_on_its_own_neutral() {
+        // A Futaba receiver's neutral reads 1024: FrSky scaling shows (1024 − 992)/820 ≈ 0.04
+        // there, its own centre 0.
+        let mut ch = [1024; 16];
+        ch[1] = 1024 + 672;
+        let f = SbusFrame::parse(&encode(ch, 0, 0)).unwrap();
+        assert!((f.channel(0, 0.0) - 32.0 / 820.0).abs() < 1e-6);
+        assert_eq!(f.channel_scaled(0, 1024, 672, 0.0), 0.0);
+        assert_eq!(f.channel_scaled(1, 1024, 672, 0.0), 1.0);
+    }
+
+    #[test]
+    fn frames_flagged_lost_do_not_keep_a_dead_link_alive() {
+        // The transmitter goes silent after t = 0; the receiver goes on repeating the last
+        // values with the "frame lost" flag (bit 2) every 7 ms and never sets failsafe.
+        let mut rx = SbusReceiver::new(Duration::from_millis(100));
+        let mut ch = [992; 16];
+        ch[2] = 1811;
+        rx.push_frame(&encode(ch, 0, 0), Instant::from_millis(0))
+            .unwrap();
+        for k in 1..=30u64 {
+            rx.push_frame(&encode(ch, 0x04, 0), Instant::from_millis(7 * k))
+                .unwrap();
+        }
+        assert_eq!(rx.frames_lost(), 30);
+        // Within 100 ms of the last fresh frame: the held values.
+        assert_eq!(rx.signal(Instant::from_millis(100)).value.channels[2], 1811);
+        // After it: lost and neutral, although repeats keep arriving (the last at 210 ms).
+        let s = rx.signal(Instant::from_millis(210));
+        assert!(s.lost);
+        assert_eq!(s.value, SbusFrame::NEUTRAL);
+        // A fresh frame brings the link back.
+        rx.push_frame(&encode(ch, 0, 0), Instant::from_millis(217))
+            .unwrap();
+        assert!(!rx.signal(Instant::from_millis(218)).lost);
+        // A link that starts with repeats is not live.
+        let mut rx = SbusReceiver::new(Duration::from_millis(100));
+        rx.push_frame(&encode(ch, 0x04, 0), Instant::from_millis(0))
+            .unwrap();
+        assert!(rx.signal(Instant::from_millis(1)).lost);
     }
 
     #[test]
