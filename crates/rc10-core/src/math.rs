@@ -258,7 +258,7 @@ pub fn ramp(current: f32, target: f32, max_step: f32) -> f32 {
     let delta = target - current;
     // Within one step: the target itself (`current + delta` can round past it when the two
     // differ in magnitude or sign). A NaN `delta` (both the same infinity) is "there".
-    if !(delta.abs() > step) {
+    if delta.abs() <= step || delta.is_nan() {
         return target;
     }
     // One step towards it, never past it by rounding.

@@ -13,7 +13,7 @@
 //! assert_eq!(&buf[16..20], &[0x00, 0x00, 0x80, 0x7f]); // JustFloat tail
 //! ```
 
-use core::fmt::{self, Write as _};
+use core::fmt;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 /// The four bytes VOFA+ JustFloat puts after every frame (the bit pattern of +inf).
