@@ -88,7 +88,8 @@ impl Instance {
 /// takes it from the bus.
 ///
 /// The FDCAN kernel clock must be configured (`config.rcc.mux.fdcansel`, e.g. PCLK1) before
-/// `CanConfigurator::new`, which otherwise panics at run time (its default source is HSE).
+/// `CanConfigurator::new`: its default source is HSE, so without HSE enabled it panics at run
+/// time (with HSE enabled, the FDCAN runs from the crystal directly).
 ///
 /// # Panics
 ///
@@ -180,8 +181,9 @@ pub struct FdcanTx {
     tx: CanTx<'static>,
     regs: pac::can::Fdcan,
     /// Bus-off as of the last `status()` (which the bus reads at the start of each tick's
-    /// transmit): while off the bus, frames are refused rather than left to go out stale
-    /// after recovery.
+    /// transmit): while off the bus, new frames are refused rather than queued to go out
+    /// stale after recovery. (Frames already queued when the bus went off are not cancelled:
+    /// at most three, sent on recovery just before the next tick's.)
     bus_off: Cell<bool>,
 }
 

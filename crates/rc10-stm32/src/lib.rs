@@ -80,7 +80,8 @@ pub enum Crystal {
 /// Why a crystal: CAN at 1 Mbit/s tolerates only a few tenths of a percent of clock error
 /// between nodes, and the internal HSI is specified to about ±1 %: fine on the bench, out of
 /// tolerance when warm or cold. Why the FDCAN mux is set: its default, HSE as a direct
-/// source, is easy to leave unconfigured, and `CanConfigurator::new` then panics.
+/// source, is easy to leave unconfigured, and `CanConfigurator::new` then panics when HSE is
+/// not enabled.
 pub fn clocks_170mhz(crystal: Crystal) -> embassy_stm32::Config {
     let (mhz, prediv) = match crystal {
         Crystal::Mhz8 => (8, rcc::PllPreDiv::DIV2),

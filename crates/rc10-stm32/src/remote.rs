@@ -89,8 +89,13 @@ pub async fn sbus_task(
 /// PPM (8 channels, RC10_LIB's AirJoy): times the rising edges of the PPM line and feeds the
 /// intervals in µs to the decoder. Edge times are read when the task runs after the EXTI
 /// interrupt: spawn it on a high-priority executor (the control executor does) so that this
-/// is a few µs after the edge; in thread mode another task's run time would add to it. (Timer
-/// input capture would give hardware edge times.)
+/// is soon after the edge; in thread mode another task's run time would add to it. Even there
+/// an edge that comes during a scheduler tick is timed when the tick ends (10–20 µs later per
+/// bus: a few percent of a stick's 1000 µs span, for that one frame), and an edge that comes
+/// before the task has re-armed the line is missed: two channels then read as one interval
+/// too long for a channel (noise, or a false sync gap), and the decoder drops that frame (and
+/// the next, after a false sync). Timer input capture would give
+/// hardware edge times; this adapter does not use it yet.
 #[embassy_executor::task]
 pub async fn ppm_task(
     mut pin: ExtiInput<'static, Async>,

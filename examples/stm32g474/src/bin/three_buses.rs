@@ -4,6 +4,11 @@
 //! FDCAN1: four M3508 (C620 ids 1–4), a chassis. FDCAN2: two GM6020 (ids 1, 2), a gimbal.
 //! FDCAN3: two M2006 (C610 ids 1, 2), feeders. All hold speed or angle targets.
 //!
+//! **The wheels (50 rpm) and feeders (120 rpm) start turning at boot**, with no remote and no
+//! enable switch: run it with the robot on blocks. The GM6020s hold the angle they powered on
+//! at (a power-on origin), so they do not move; a real gimbal uses absolute zeros measured on
+//! the mechanism, as the `gimbal` example shows.
+//!
 //! Wiring: NUCLEO-G474RE with three transceivers: FDCAN1 PA11/PA12, FDCAN2 PB12/PB13, FDCAN3
 //! PA8/PB4; each bus terminated with 120 Ω at both ends.
 //!
@@ -13,8 +18,9 @@
 
 use embassy_executor::Spawner;
 use embassy_time::{Duration, Ticker};
+use rc10_core::encoder::Origin;
 use rc10_core::motor::Motor;
-use rc10_core::motor::dji::DjiMotor;
+use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
 use rc10_examples_stm32g474 as board;
 use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
@@ -33,9 +39,16 @@ static WHEELS: [DjiMotor; 4] = [
     ok(DjiMotor::m3508(3)),
     ok(DjiMotor::m3508(4)),
 ];
+/// A GM6020's default zero is raw count 0, wherever that is on the mechanism: an angle target
+/// would turn the motor up to 180° towards it (into a pitch's stops). This demo counts from the
+/// power-on position instead, so angle 0 holds the gimbal where it is.
+const HOLD_AT_POWER_ON: DjiConfig = DjiConfig {
+    origin: Origin::PowerOn,
+    ..DjiConfig::default_for(DjiModel::Gm6020Voltage)
+};
 static GIMBAL: [DjiMotor; 2] = [
-    ok(DjiMotor::gm6020_voltage(1)),
-    ok(DjiMotor::gm6020_voltage(2)),
+    ok(DjiMotor::new(DjiModel::Gm6020Voltage, 1, HOLD_AT_POWER_ON)),
+    ok(DjiMotor::new(DjiModel::Gm6020Voltage, 2, HOLD_AT_POWER_ON)),
 ];
 static FEEDERS: [DjiMotor; 2] = [ok(DjiMotor::m2006(1)), ok(DjiMotor::m2006(2))];
 static BUS1: StaticCell<G4Bus> = StaticCell::new();
