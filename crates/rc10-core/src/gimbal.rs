@@ -16,6 +16,11 @@ pub struct GimbalLimits {
     /// ring (any angle, shortest way). It may be wider than a turn (for example `(-270.0,
     /// 270.0)`) and need not be centred on 0; reversed bounds are swapped, and a NaN or
     /// infinite bound leaves that side open.
+    ///
+    /// The yaw motor's multi-turn angle must start within the range: rc10 cannot tell a
+    /// reading a turn off from the real position. A GM6020 with an absolute origin first
+    /// reads within ±180° of its zero, so put the zero in the middle of the range; a range
+    /// wider than ±180° around it needs the gimbal homed (or powered on near its zero).
     pub yaw_range_deg: Option<(f32, f32)>,
 }
 
@@ -80,7 +85,7 @@ impl GimbalLimits {
 /// range, never turns through a stop); if the range holds none of them, the end of the range
 /// nearer to the target heading (round the circle).
 fn within_yaw_range(nearest: f32, lo: f32, hi: f32) -> f32 {
-    let open = |bound: f32, side: f32| if bound.is_nan() { side } else { bound };
+    let open = |bound: f32, side: f32| if bound.is_finite() { bound } else { side };
     let (lo, hi) = (open(lo, f32::NEG_INFINITY), open(hi, f32::INFINITY));
     let (lo, hi) = if lo > hi { (hi, lo) } else { (lo, hi) };
     let candidate = if nearest < lo {
@@ -176,6 +181,51 @@ mod tests {
         // Reversed bounds mean the same range.
         let t = limited(350.0, 0.0).targets(-10.0, 0.0, 0.0, 0.0).unwrap();
         assert!((t.yaw_motor_deg - 350.0).abs() < 1e-3, "{t:?}");
+    }
+
+    #[test]
+    fn the_turn_inside_the_range_is_found_from_beyond_either_end() {
+        // Range ±270°. Motor at −265°, heading 80°: the nearest turn is −280° (15° away, but
+        // past the −270° stop), so the gimbal goes the long way inside the range to 80°.
+        let t = limited(-270.0, 270.0)
+            .targets(80.0, 0.0, 0.0, -265.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 80.0).abs() < 1e-3, "{t:?}");
+        // Mirrored: motor at 265°, heading −80°: 280° is past the stop, −80° is inside.
+        let t = limited(-270.0, 270.0)
+            .targets(-80.0, 0.0, 0.0, 265.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg + 80.0).abs() < 1e-3, "{t:?}");
+        // Reversed bounds are the same range.
+        let t = limited(270.0, -270.0)
+            .targets(80.0, 0.0, 0.0, -265.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 80.0).abs() < 1e-3, "{t:?}");
+        // Two turns away: range 720..1000°, motor at 730°, heading 0° is reached at 720°.
+        let t = limited(720.0, 1000.0)
+            .targets(0.0, 0.0, 0.0, 730.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 720.0).abs() < 1e-3, "{t:?}");
+        let t = limited(720.0, 1000.0)
+            .targets(10.0, 0.0, 0.0, 2000.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 730.0).abs() < 1e-3, "{t:?}");
+    }
+
+    #[test]
+    fn infinite_bounds_are_open_sides_even_on_the_same_side() {
+        // (+inf, NaN): both sides open, a slip ring: from 350°, 10° is reached at 370°.
+        for (lo, hi) in [
+            (f32::INFINITY, f32::NAN),
+            (f32::INFINITY, f32::INFINITY),
+            (f32::NEG_INFINITY, f32::NEG_INFINITY),
+        ] {
+            let t = limited(lo, hi).targets(10.0, 0.0, 0.0, 350.0).unwrap();
+            assert!(
+                (t.yaw_motor_deg - 370.0).abs() < 1e-3,
+                "({lo}, {hi}): {t:?}"
+            );
+        }
     }
 
     #[test]

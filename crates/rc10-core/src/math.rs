@@ -261,13 +261,12 @@ pub fn ramp(current: f32, target: f32, max_step: f32) -> f32 {
     if delta.abs() <= step || delta.is_nan() {
         return target;
     }
-    // One step towards it, never past it by rounding.
+    // One step towards it. Rounding is monotonic: `step` is below the rounded gap, so below
+    // the exact one, and `current ± step` rounds to at most `target`: never past it.
     if delta > 0.0 {
-        let next = current + step;
-        if next > target { target } else { next }
+        current + step
     } else {
-        let next = current - step;
-        if next < target { target } else { next }
+        current - step
     }
 }
 
@@ -405,7 +404,7 @@ mod tests {
 
     proptest! {
         #[test]
-        fn ramp_never_passes_the_target_and_moves_at_most_one_step(
+        fn ramp_never_passes_the_target_and_lands_on_it_within_a_step(
             current in -1.0e9f32..1.0e9, target in -1.0e9f32..1.0e9, step in 0.0f32..1.0e9,
         ) {
             let next = ramp(current, target, step);

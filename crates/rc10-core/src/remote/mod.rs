@@ -74,9 +74,9 @@ impl<T: Copy> Link<T> {
     /// transmitter is gone (as many do until their own failsafe delay, or for ever in "hold"
     /// mode) does not keep the robot acting on stale commands.
     pub fn hold(&mut self, frame: T) {
-        if !self.failsafe && self.last_valid.is_some() {
-            self.last = frame;
-        }
+        // Shown only while the link is live (a failsafe or timed-out link shows neutral, and
+        // the next fresh frame replaces it).
+        self.last = frame;
         self.frames = self.frames.wrapping_add(1);
     }
 
@@ -111,7 +111,7 @@ impl<T: Copy> Link<T> {
         }
     }
 
-    /// Valid frames accepted.
+    /// Valid frames received (fresh ones and held repeats).
     pub const fn frames(&self) -> u32 {
         self.frames
     }
