@@ -210,6 +210,12 @@ mod tests {
             .targets(10.0, 0.0, 0.0, 2000.0)
             .unwrap();
         assert!((t.yaw_motor_deg - 730.0).abs() < 1e-3, "{t:?}");
+        // From a reading two turns below it (not a valid start, but the target still lies
+        // within the range): heading 100° from 0° is reached at 100 + 2·360 = 820°.
+        let t = limited(720.0, 1000.0)
+            .targets(100.0, 0.0, 0.0, 0.0)
+            .unwrap();
+        assert!((t.yaw_motor_deg - 820.0).abs() < 1e-3, "{t:?}");
     }
 
     #[test]
