@@ -28,5 +28,7 @@ pub mod metrics;
 pub mod output;
 pub mod plant;
 pub mod scenario;
+/// The small-vector crate [`scenario::MotorSamples`] is built on, for code that builds samples.
+pub use smallvec;
 #[cfg(test)]
 mod test_values;

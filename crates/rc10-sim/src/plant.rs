@@ -215,14 +215,43 @@ pub struct DjiEsc {
     powered: bool,
     locked: bool,
     feedback_phase_us: u64,
-    /// `(dt, 1 − e^(−dt/τ))` of the electrical lag for the last `dt` (steps are constant).
-    lag: (f64, f64),
+    /// What a step multiplies by, for the last step length (steps are constant).
+    factors: StepFactors,
     /// The command frame's ID and the offset of this ESC's 2 bytes in it, if `esc_id` has a
     /// command slot (worked out once: every frame on the bus is offered to every ESC).
     command_slot: Option<(u32, usize)>,
     /// For a current loop with ordinary constants: speed-gradient × torque constant, which
     /// turns amps into rpm of headroom (see [`DjiEsc::inside_torque_speed_line`]).
     rpm_per_amp: Option<f64>,
+}
+
+/// What a plant step of one length multiplies by (see [`DjiEsc::step`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct StepFactors {
+    /// The step length these are for, s (NaN before the first step).
+    dt_s: f64,
+    /// `1 − e^(−dt/τ)`: the share of the way to its target the current moves in a step.
+    lag: f64,
+    /// `dt / J`, s/(kg·m²): the output speed change per N·m in a step (rad/s).
+    dt_per_inertia: f64,
+    /// `gear ratio · dt`, s: rotor radians per output rad/s in a step.
+    rotor_turn_per_omega: f64,
+    /// `1 / R_th`, W/K: the heat the winding loses per kelvin above ambient.
+    cooling_w_per_k: f64,
+    /// `dt / C_th`, K/W: the temperature change per watt in a step.
+    dt_per_heat_capacity: f64,
+}
+
+impl StepFactors {
+    /// Before the first step: NaN matches no step length.
+    const NONE: Self = Self {
+        dt_s: f64::NAN,
+        lag: 0.0,
+        dt_per_inertia: 0.0,
+        rotor_turn_per_omega: 0.0,
+        cooling_w_per_k: 0.0,
+        dt_per_heat_capacity: 0.0,
+    };
 }
 
 impl DjiEsc {
@@ -240,7 +269,7 @@ impl DjiEsc {
             powered: true,
             locked: false,
             feedback_phase_us: feedback_phase_us % 1000,
-            lag: (0.0, 0.0),
+            factors: StepFactors::NONE,
             command_slot: params
                 .model
                 .command_slot(esc_id)
@@ -293,12 +322,30 @@ impl DjiEsc {
         i.abs() <= limit_amps && headroom_rpm > 1e-100 && i.abs() * rpm_per_amp < headroom_rpm
     }
 
-    /// The electrical lag's step factor for `dt_s` with time constant `tau_s`, cached.
-    fn lag_factor(&mut self, dt_s: f64, tau_s: f64) -> f64 {
-        if self.lag.0 != dt_s {
-            self.lag = (dt_s, 1.0 - (-dt_s / tau_s).exp());
+    /// The factors of a step of `dt_s`, worked out when the step length changes: the step
+    /// then multiplies where the equations divide (a division's latency sits on the chain
+    /// from current to speed to angle).
+    fn step_factors(&mut self, dt_s: f64) -> StepFactors {
+        if self.factors.dt_s != dt_s {
+            let p = &self.params;
+            let tau_s = match p.drive {
+                Drive::CurrentLoop { tau_s, .. } => tau_s,
+                Drive::Voltage {
+                    resistance_ohm,
+                    inductance_h,
+                    ..
+                } => inductance_h / resistance_ohm,
+            };
+            self.factors = StepFactors {
+                dt_s,
+                lag: 1.0 - (-dt_s / tau_s).exp(),
+                dt_per_inertia: dt_s / (p.inertia_kg_m2 + self.load.inertia_kg_m2),
+                rotor_turn_per_omega: p.gear_ratio * dt_s,
+                cooling_w_per_k: 1.0 / p.thermal_resistance_k_per_w,
+                dt_per_heat_capacity: dt_s / p.thermal_capacity_j_per_k,
+            };
         }
-        self.lag.1
+        self.factors
     }
 
     /// The parameters.
@@ -385,6 +432,7 @@ impl DjiEsc {
 
     /// Integrates `dt_s` seconds at time `now_us`.
     pub fn step(&mut self, now_us: u64, dt_s: f64) {
+        let f = self.step_factors(dt_s);
         let p = self.params;
         let load_torque = match self.load.step {
             Some((t, torque)) if now_us >= t => torque,
@@ -395,12 +443,12 @@ impl DjiEsc {
             Drive::CurrentLoop {
                 amps_per_raw,
                 limit_amps,
-                tau_s,
                 no_load_rpm,
                 gradient_rpm_per_nm,
+                ..
             } => {
                 let target = (command * amps_per_raw).clamp(-limit_amps, limit_amps);
-                let i = self.current + (target - self.current) * self.lag_factor(dt_s, tau_s);
+                let i = self.current + (target - self.current) * f.lag;
                 if self.inside_torque_speed_line(i, no_load_rpm, limit_amps) {
                     // The clamp below would return `i` itself: skip its divisions.
                     i
@@ -419,19 +467,17 @@ impl DjiEsc {
                 volts_per_raw,
                 raw_limit,
                 resistance_ohm,
-                inductance_h,
                 ke_v_s_per_rad,
+                ..
             } => {
                 let v = command.clamp(-raw_limit, raw_limit) * volts_per_raw;
                 let i_ss = (v - ke_v_s_per_rad * self.omega) / resistance_ohm;
-                let tau = inductance_h / resistance_ohm;
-                self.current + (i_ss - self.current) * self.lag_factor(dt_s, tau)
+                self.current + (i_ss - self.current) * f.lag
             }
         };
         if !self.powered {
             self.current = 0.0;
         }
-        let inertia = p.inertia_kg_m2 + self.load.inertia_kg_m2;
         let drive = p.torque_constant_nm_per_a * self.current - load_torque;
         if self.locked {
             self.omega = 0.0;
@@ -444,8 +490,7 @@ impl DjiEsc {
                 // Static friction holds the shaft until the drive exceeds it.
                 drive.clamp(-p.coulomb_nm, p.coulomb_nm)
             };
-            let accel = (drive - viscous - coulomb) / inertia;
-            let next = self.omega + accel * dt_s;
+            let next = self.omega + (drive - viscous - coulomb) * f.dt_per_inertia;
             // Friction stops the shaft; it does not reverse it.
             self.omega =
                 if moving && next.signum() != self.omega.signum() && drive.abs() <= p.coulomb_nm {
@@ -454,11 +499,11 @@ impl DjiEsc {
                     next
                 };
         }
-        self.rotor_angle += self.omega * p.gear_ratio * dt_s;
+        self.rotor_angle += self.omega * f.rotor_turn_per_omega;
         // Copper losses heat the winding; it cools towards ambient.
         let loss_w = 1.5 * self.current * self.current * p.phase_resistance_ohm;
-        let cooling_w = (self.temperature - p.ambient_c) / p.thermal_resistance_k_per_w;
-        self.temperature += (loss_w - cooling_w) / p.thermal_capacity_j_per_k * dt_s;
+        let cooling_w = (self.temperature - p.ambient_c) * f.cooling_w_per_k;
+        self.temperature += (loss_w - cooling_w) * f.dt_per_heat_capacity;
     }
 
     /// The feedback frame the ESC sends now (DJI layout, all quantised as the real ESC does).

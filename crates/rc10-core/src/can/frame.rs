@@ -29,6 +29,7 @@ pub struct CanFrame {
 
 impl CanFrame {
     /// A data frame, or `None` if `data` is longer than 8 bytes.
+    #[inline]
     pub fn new(id: impl Into<Id>, data: &[u8]) -> Option<Self> {
         let mut buf = [0u8; 8];
         buf.get_mut(..data.len())?.copy_from_slice(data);
@@ -41,11 +42,13 @@ impl CanFrame {
     }
 
     /// A standard-ID data frame; `None` if `raw_id > 0x7FF` or `data` is longer than 8 bytes.
+    #[inline]
     pub fn standard(raw_id: u16, data: &[u8]) -> Option<Self> {
         Self::new(StandardId::new(raw_id)?, data)
     }
 
     /// An extended-ID data frame; `None` if `raw_id > 0x1FFF_FFFF` or `data` is too long.
+    #[inline]
     pub fn extended(raw_id: u32, data: &[u8]) -> Option<Self> {
         Self::new(ExtendedId::new(raw_id)?, data)
     }
@@ -98,6 +101,20 @@ impl CanFrame {
         } else {
             self.data.get(..self.dlc()).unwrap_or(&[])
         }
+    }
+
+    /// The payload as one integer, its first byte most significant: `data().len()` bytes,
+    /// 0 for a remote or empty frame. Bytes of the buffer beyond the DLC do not count.
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "the payload is at most 8 bytes: 64 − 8·len is 0–64"
+    )]
+    pub(crate) fn data_word(&self) -> u64 {
+        let bits = 8 * self.data().len() as u32;
+        // A shift by 64 (no payload) is `None`: the word is 0.
+        u64::from_be_bytes(self.data)
+            .checked_shr(64 - bits)
+            .unwrap_or(0)
     }
 
     /// The payload as exactly eight bytes, if the frame is a data frame with DLC 8.
@@ -274,6 +291,30 @@ impl IdFilter {
 mod tests {
     use super::*;
     use embedded_can::Frame as _;
+
+    #[test]
+    fn data_word_is_the_payload_first_byte_high_without_bytes_beyond_the_dlc() {
+        let junk_tail = CanFrame {
+            id: StandardId::new(0x201).unwrap().into(),
+            dlc: 3,
+            remote: false,
+            data: [0x12, 0x34, 0x56, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF],
+        };
+        assert_eq!(junk_tail.data_word(), 0x12_3456);
+        let full = CanFrame::standard(0x200, &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap();
+        assert_eq!(full.data_word(), 0x0102_0304_0506_0708);
+        let empty = CanFrame {
+            dlc: 0,
+            ..junk_tail
+        };
+        assert_eq!(empty.data_word(), 0);
+        let remote = CanFrame {
+            dlc: 8,
+            remote: true,
+            ..junk_tail
+        };
+        assert_eq!(remote.data_word(), 0);
+    }
 
     #[test]
     fn frame_pads_beyond_dlc_with_zero_and_compares_by_content() {

@@ -81,9 +81,7 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
     let data = frame.data();
     // SOF to the end of the data, right-aligned: at most 39 + 64 = 103 bits.
     let data_bits = 8 * data.len() as u32;
-    let data_word = data
-        .iter()
-        .fold(0u128, |word, &byte| (word << 8) | u128::from(byte));
+    let data_word = u128::from(frame.data_word());
     let message = (u128::from(header) << data_bits) | data_word;
     let crc = crc15(message);
     // The stuffed region, SOF to the end of the CRC, left-aligned (frame bit i is word bit
@@ -91,12 +89,25 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
     let len = header_len + data_bits + 15;
     let stream = (message << 15) | u128::from(crc);
     let padded = (stream << (128 - len)) | neutral_padding(stream & 1 == 1, 128 - len);
-    len + stuff_bits(padded) + UNSTUFFED_TAIL_BITS
+    // A standard frame's stuffed region is at most 19 + 64 + 15 = 98 bits: its first 13
+    // bytes; an extended one's at most 118 bits: 15 bytes. The padding after it adds no
+    // stuff bits, so the walk stops there (a fixed count, unrolled).
+    let stuffed = if header_len == 19 {
+        stuff_bits::<13>(padded)
+    } else {
+        stuff_bits::<15>(padded)
+    };
+    len + stuffed + UNSTUFFED_TAIL_BITS
 }
 
 /// Time a frame occupies the bus at `bitrate_bps`, in whole microseconds (rounded up).
 pub fn frame_time_us(frame: &CanFrame, bitrate_bps: u32) -> u32 {
-    let bits = u64::from(frame_bits(frame));
+    let bits = frame_bits(frame);
+    if bitrate_bps == 1_000_000 {
+        // One bit per microsecond (the usual rate): no division.
+        return bits;
+    }
+    let bits = u64::from(bits);
     let rate = u64::from(bitrate_bps.max(1));
     (bits * 1_000_000).div_ceil(rate) as u32
 }
@@ -138,21 +149,26 @@ fn neutral_padding(last: bool, count: u32) -> u128 {
     pattern & ((1u128 << count) - 1)
 }
 
-/// Stuff bits a transmitter inserts into these 128 bits, sent MSB first.
-fn stuff_bits(bits: u128) -> u32 {
-    let (_, stuffed) =
-        bits.to_be_bytes()
-            .iter()
-            .fold((STUFF_START, 0u32), |(state, stuffed), &byte| {
-                // state < 16 and a u8 index into a 256-entry row: always present.
-                let entry = STUFF_TABLE
-                    .get(usize::from(state))
-                    .and_then(|row| row.get(usize::from(byte)))
-                    .copied()
-                    .unwrap_or(0);
-                // At most 4 per byte, 64 in all: no overflow.
-                (entry & 0x0F, stuffed.saturating_add(u32::from(entry >> 4)))
-            });
+/// Stuff bits a transmitter inserts into the first `BYTES` bytes of these 128 bits, sent
+/// MSB first.
+fn stuff_bits<const BYTES: usize>(bits: u128) -> u32 {
+    let mut state = STUFF_START;
+    let mut stuffed = 0u32;
+    for &byte in bits.to_be_bytes().iter().take(BYTES) {
+        let byte = usize::from(byte);
+        let state_index = usize::from(state);
+        // A u8 row index into 256 rows, and a state below 16 into 16 columns: always
+        // present. The next state is the only value carried from byte to byte, one load.
+        let (Some(next), Some(count)) = (
+            STUFF_NEXT.get(byte).and_then(|row| row.get(state_index)),
+            STUFF_COUNT.get(byte).and_then(|row| row.get(state_index)),
+        ) else {
+            return stuffed;
+        };
+        state = *next;
+        // At most 4 per byte, 64 in all: no overflow.
+        stuffed = stuffed.saturating_add(u32::from(*count));
+    }
     stuffed
 }
 
@@ -215,28 +231,53 @@ const fn stuff_bit(state: u8, bit: bool) -> (u8, bool) {
     }
 }
 
-/// For each state and byte: `stuff bits << 4 | new state`.
+/// The stuffing of one byte from `state`: `(state after it, stuff bits inserted)`.
+#[allow(
+    clippy::arithmetic_side_effects,
+    reason = "k < 8 and at most 8 stuff bits: no overflow"
+)]
+const fn stuff_byte(state: u8, byte: u8) -> (u8, u8) {
+    let (mut s, mut stuffed, mut k) = (state, 0u8, 0);
+    while k < 8 {
+        let (next, stuff) = stuff_bit(s, (byte >> (7 - k)) & 1 == 1);
+        s = next;
+        stuffed += stuff as u8;
+        k += 1;
+    }
+    (s, stuffed)
+}
+
+/// For each byte and state: the state after the byte. Indexed `[byte][state]` so that the
+/// chain from one byte to the next is a single load (the row address does not depend on
+/// the state).
 // Built at compile time: an out-of-bounds index would fail the build, not panic at run time.
 #[allow(clippy::indexing_slicing)]
-const STUFF_TABLE: [[u8; 256]; 16] = {
-    let mut table = [[0u8; 256]; 16];
-    let mut state = 0;
-    while state < 16 {
-        let mut byte = 0;
-        while byte < 256 {
-            let mut s = state as u8;
-            let mut stuffed = 0u8;
-            let mut k = 0;
-            while k < 8 {
-                let (next, stuff) = stuff_bit(s, (byte >> (7 - k)) & 1 == 1);
-                s = next;
-                stuffed += stuff as u8;
-                k += 1;
-            }
-            table[state][byte] = stuffed << 4 | s;
-            byte += 1;
+const STUFF_NEXT: [[u8; 16]; 256] = {
+    let mut table = [[0u8; 16]; 256];
+    let mut byte = 0;
+    while byte < 256 {
+        let mut state = 0;
+        while state < 16 {
+            table[byte][state] = stuff_byte(state as u8, byte as u8).0;
+            state += 1;
         }
-        state += 1;
+        byte += 1;
+    }
+    table
+};
+
+/// For each byte and state: the stuff bits inserted while sending the byte (0–2).
+#[allow(clippy::indexing_slicing)]
+const STUFF_COUNT: [[u8; 16]; 256] = {
+    let mut table = [[0u8; 16]; 256];
+    let mut byte = 0;
+    while byte < 256 {
+        let mut state = 0;
+        while state < 16 {
+            table[byte][state] = stuff_byte(state as u8, byte as u8).1;
+            state += 1;
+        }
+        byte += 1;
     }
     table
 };

@@ -174,13 +174,18 @@ pub struct MotorSample {
     pub online: bool,
 }
 
+/// The motors of one [`Sample`], in scenario order: stored inside the sample for up to four
+/// motors (a chassis), on the heap beyond. It dereferences to `[MotorSample]`; build one with
+/// `collect()` or [`smallvec!`](crate::smallvec::smallvec).
+pub type MotorSamples = smallvec::SmallVec<[MotorSample; 4]>;
+
 /// All motors at one tick.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sample {
     /// Time, ms.
     pub t_ms: u64,
     /// One per motor, in scenario order.
-    pub motors: Vec<MotorSample>,
+    pub motors: MotorSamples,
     /// The chassis application's view, in chassis scenarios.
     pub chassis: Option<ChassisSample>,
 }

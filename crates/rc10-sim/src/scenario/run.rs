@@ -348,12 +348,7 @@ pub fn run_observed(
         bus.start_next(t);
     }
 
-    let metrics = scenario
-        .targets
-        .iter()
-        .enumerate()
-        .filter_map(|(i, spec)| target_metrics(i, spec, &samples))
-        .collect();
+    let metrics = target_metrics(&scenario.targets, &samples);
     Ok(RunResult {
         name: scenario.name.clone(),
         bus: bus.stats(),
