@@ -73,9 +73,15 @@ impl CanNode for LegacyM3508 {
             let t = l.target?;
             if !l.primed {
                 // RC10_LIB's error history starts at zero, so its first step kicks by kp·e.
-                // rc10's controller starts from the present error; prime it with a zero error
-                // (inside the deadband: no output) to reproduce RC10_LIB faithfully.
+                // rc10's controller starts from the present error and leaves its history
+                // alone inside the deadband: prime it with a zero error under no deadband
+                // (no output), then restore the demo's band.
+                let _ = l.pid.set_config(IncrementalPidConfig {
+                    deadband: 0.0,
+                    ..RC10_DEMO_SPEED_PID
+                });
                 l.pid.update(0.0, 0.0, dt_s);
+                let _ = l.pid.set_config(RC10_DEMO_SPEED_PID);
                 l.primed = true;
             }
             Some(l.pid.update(t, rpm, dt_s).output)

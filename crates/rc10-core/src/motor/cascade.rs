@@ -473,8 +473,16 @@ mod tests {
         c.step(&Measured::default(), 0.001, 20.0);
         c.set_target(ControlMode::Disabled, 0.0);
         assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 0.0);
-        c.set_target(ControlMode::Speed, 0.0);
+        // Wind the speed loop's integral up, then reset: the next step starts from nothing,
+        // p = 0.1·10 = 1 and i = 10·10·0.001 = 0.1 (the first trapezoid uses e at both ends).
+        c.set_target(ControlMode::Speed, 10.0);
+        for _ in 0..100 {
+            c.step(&Measured::default(), 0.001, 20.0);
+        }
+        assert!(c.speed.integral() > 5.0, "{}", c.speed.integral());
         c.reset();
-        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 0.0);
+        assert_eq!(c.output(), 0.0);
+        let out = c.step(&Measured::default(), 0.001, 20.0);
+        assert!((out - 1.1).abs() < 1e-6, "{out}");
     }
 }

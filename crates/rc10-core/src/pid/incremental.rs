@@ -32,7 +32,8 @@ pub struct IncrementalPidConfig {
     /// `|output| ≤ output_limit`. In the incremental form the output *is* the integrator, so
     /// limiting it is the anti-windup: the output leaves the limit as soon as the error reverses.
     pub output_limit: f32,
-    /// While `|error| ≤ deadband` the output is held (no increment).
+    /// While `|error| ≤ deadband` the output is held (no increment) and the error history is
+    /// not updated, so the P and D differences span the steps outside the band. 0 is no band.
     pub deadband: f32,
     /// Tracking-differentiator speed `r` in rad/s applied to the target; `None` for no TD.
     pub td_r_rad_s: Option<f32>,
@@ -110,10 +111,19 @@ impl IncrementalPidConfig {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IncrementalPid {
     config: IncrementalPidConfig,
+    /// The deadband as one comparison: a step runs when `|e| > band`; −1 for no band
+    /// (deadband 0), so an error of exactly 0 runs too.
+    band: f32,
     td: Option<TrackingDifferentiator>,
     output: f32,
     history: Option<(f32, f32)>,
     last: PidTerms,
+}
+
+/// [`IncrementalPid::band`] for `deadband` (validated: finite, not negative).
+const fn band_of(deadband: f32) -> f32 {
+    // A deadband of 0 is no band: an error of exactly 0 is a step like any other.
+    if deadband == 0.0 { -1.0 } else { deadband }
 }
 
 impl IncrementalPid {
@@ -131,6 +141,7 @@ impl IncrementalPid {
         };
         Ok(Self {
             config,
+            band: band_of(config.deadband),
             td,
             output: 0.0,
             history: None,
@@ -144,12 +155,22 @@ impl IncrementalPid {
     }
 
     /// Replaces the configuration (live tuning); the output is re-limited, the history kept.
+    ///
+    /// A new TD rate `r` goes on from the tracked value and rate of the old one; a TD switched
+    /// on while running starts at the target, where the error was measured from; a TD
+    /// switched off hands over to the raw target at once (a P step of `kp` times whatever
+    /// the TD still lagged behind it).
     pub fn set_config(&mut self, config: IncrementalPidConfig) -> Result<(), PidConfigError> {
         let fresh = Self::new(config)?;
         if config.td_r_rad_s != self.config.td_r_rad_s {
+            let previous = self.td.take();
             self.td = fresh.td;
+            if let (Some(td), Some(previous)) = (&mut self.td, &previous) {
+                td.continue_from(previous);
+            }
         }
         self.config = config;
+        self.band = fresh.band;
         self.output = saturate(self.output, config.output_limit);
         Ok(())
     }
@@ -165,7 +186,10 @@ impl IncrementalPid {
         let c = self.config;
         let tracked = match &mut self.td {
             Some(td) => {
-                if !td.is_started() {
+                // A fresh controller tracks from the measurement, so a target step is
+                // smoothed from where the motor is; a TD switched on while running (history
+                // kept) starts at the target itself, so the error goes on unchanged.
+                if !td.is_started() && self.history.is_none() {
                     td.reset(measurement);
                 }
                 td.update(target, dt_s).0
@@ -176,7 +200,8 @@ impl IncrementalPid {
         let (e1, e2) = self.history.unwrap_or((e, e));
         let dt_ok = dt_valid(dt_s);
 
-        let (p, i, d) = if dt_ok && e.abs() > c.deadband {
+        let outside_band = e.abs() > self.band;
+        let (p, i, d) = if dt_ok && outside_band {
             (
                 finite(c.kp * (e - e1)),
                 finite(c.ki * e * dt_s),
@@ -192,7 +217,10 @@ impl IncrementalPid {
         };
         // Finite terms: the sum is finite or ±inf, never NaN, and the capped limit is finite.
         self.output = clamp_abs(self.output + p + i + d, below(c.output_limit, f32::MAX));
-        if dt_ok {
+        // Inside the deadband nothing happens, the history included: the P and D
+        // differences then span the steps outside the band only, and a target that dithers
+        // across the band edge cannot ratchet the output by kp·(e − e_in-band) each time.
+        if dt_ok && outside_band {
             self.history = Some((e, e1));
         }
         self.last = PidTerms {
@@ -237,6 +265,58 @@ mod tests {
     use proptest::prelude::*;
 
     const DT: f32 = 0.001;
+
+    #[test]
+    fn a_target_dithering_across_the_deadband_does_not_ratchet_the_output() {
+        // kp 18, deadband 5: errors 7, 3, 7, 3, 7. The steps inside the band change nothing,
+        // the history included, so P = 18·(7 − 7) = 0 each time the error leaves it.
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(18.0, 0.0, 0.0).with_deadband(5.0))
+                .unwrap();
+        for e in [7.0, 3.0, 7.0, 3.0, 7.0] {
+            c.update(e, 0.0, DT);
+        }
+        assert_eq!(c.output(), 0.0);
+        // Out of the band at 9: P spans the outside steps, 18·(9 − 7) = 36.
+        c.update(3.0, 0.0, DT);
+        assert_eq!(c.update(9.0, 0.0, DT).p, 36.0);
+        assert_eq!(c.output(), 36.0);
+    }
+
+    /// Runs kp 18, ki 15 /s towards 300 from 250 until the TD (if any) has caught up.
+    fn settled(td: Option<f32>) -> IncrementalPid {
+        let cfg = IncrementalPidConfig::new(18.0, 15.0, 0.0).with_output_limit(1e6);
+        let cfg = match td {
+            Some(r) => cfg.with_td(r),
+            None => cfg,
+        };
+        let mut c = IncrementalPid::new(cfg).unwrap();
+        for _ in 0..2000 {
+            c.update(300.0, 250.0, DT);
+        }
+        c
+    }
+
+    #[test]
+    fn a_new_td_rate_goes_on_from_the_tracked_target() {
+        let mut c = settled(Some(30.0));
+        let before = c.output();
+        c.set_config(*c.config()).unwrap(); // unchanged: nothing to do
+        c.set_config(c.config().with_td(40.0)).unwrap();
+        // The tracked target stays at 300: e = 50 goes on, P = 0, I = 15·50·0.001 = 0.75
+        // (restarted from the measurement it would be P = 18·(0 − 50) = −900).
+        let step = c.update(300.0, 250.0, DT).output - before;
+        assert!((step - 0.75).abs() < 0.01, "{step}");
+    }
+
+    #[test]
+    fn a_td_switched_on_while_running_starts_at_the_target() {
+        let mut c = settled(None);
+        let before = c.output();
+        c.set_config(c.config().with_td(30.0)).unwrap();
+        let step = c.update(300.0, 250.0, DT).output - before;
+        assert!((step - 0.75).abs() < 0.01, "{step}");
+    }
 
     #[test]
     fn increments_follow_velocity_form_by_hand() {

@@ -255,7 +255,11 @@ impl Pid {
     /// Replaces the configuration (live tuning), keeping the integral (re-limited) and history.
     pub fn set_config(&mut self, config: PidConfig) -> Result<(), PidConfigError> {
         config.validate()?;
-        if config.d_cutoff_hz != self.config.d_cutoff_hz {
+        if config.kd == 0.0 {
+            // No D path runs while kd is 0, so the filter would keep the derivative of the
+            // moment kd was cleared and hand it back when kd returns: start it afresh.
+            self.d_filter = LowPass::new(config.d_cutoff_hz);
+        } else if config.d_cutoff_hz != self.config.d_cutoff_hz {
             // New cutoff, same present output: no bump in the D term.
             let present = self.d_filter.output();
             self.d_filter = LowPass::new(config.d_cutoff_hz);
@@ -405,12 +409,14 @@ impl Pid {
     }
 
     /// The integral after this step, starting from the stored one, given the increment's
-    /// trapezoid `error + prev_error` (conditional integration against `out_limit`).
+    /// trapezoid mean `(error + prev_error) / 2`, computed as `0.5·error + 0.5·prev_error` so
+    /// that two errors of `f32::MAX` stay finite (conditional integration against
+    /// `out_limit`).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn integrate(
         &self,
-        error_sum: f32,
+        error_mean: f32,
         dt_s: f32,
         (p, d, feed_forward): (f32, f32, f32),
         out_limit: f32,
@@ -419,7 +425,8 @@ impl Pid {
         // Held within the limit in force (which may have dropped since the last step); a
         // new value below replaces it already clamped.
         let integral = clamp_abs(self.integral, i_limit);
-        let increment = self.config.ki * 0.5 * error_sum * dt_s;
+        // Finite error mean: a ki so small that it multiplies to 0 gives 0, not 0 · ∞ = NaN.
+        let increment = self.config.ki * error_mean * dt_s;
         let candidate = clamp_abs(integral + increment, i_limit);
         let unlimited = p + candidate + d + feed_forward;
         // Signs compared, not multiplied: a product of two tiny values underflows to 0.
@@ -464,7 +471,7 @@ impl Pid {
                 None => error,
             };
             self.integrate(
-                error + prev_error,
+                0.5 * error + 0.5 * prev_error,
                 dt_s,
                 (p, d, feed_forward),
                 out_limit,
@@ -564,7 +571,7 @@ impl Pid {
                 None => error,
             };
             self.integrate(
-                error + prev_error,
+                0.5 * error + 0.5 * prev_error,
                 dt_s,
                 (p, d, feed_forward),
                 out_limit,
@@ -755,12 +762,45 @@ mod tests {
         for _ in 0..10_000 {
             c.update(100.0, 0.0, DT);
         }
-        // Without anti-windup the integral would be ~1e5; with it the output sits at the limit
-        // and the integral stops as soon as p + i exceeds it.
-        assert!(c.integral() <= 10.0, "integral = {}", c.integral());
-        // Once the error reverses, the output leaves saturation immediately.
+        // Without anti-windup the integral would be ~1e5 (or the 10 its clamp allows); with
+        // it, p = 1·100 alone is past the limit from the first step, so it never grows.
+        assert_eq!(c.integral(), 0.0);
+        // Once the error reverses, the output leaves saturation at once: p = −5, and the
+        // trapezoid (−5 + 100)/2 · 1000 · 0.001 = 47.5 brings the integral to its limit 10.
         let t = c.update(0.0, 5.0, DT);
-        assert!(t.output < 10.0, "output = {}", t.output);
+        assert!((t.output - 5.0).abs() < 1e-5, "output = {}", t.output);
+    }
+
+    #[test]
+    fn restoring_kd_does_not_bring_back_the_derivative_of_before() {
+        // kd 0.05 through a 20 Hz filter, 10 ms steps; the shaft turns 24 units a step
+        // (2400 /s): raw D = −0.05 · 2400 = −120, and the filter settles there.
+        let cfg = PidConfig::new(0.0, 0.0, 0.05).with_d_cutoff_hz(20.0);
+        let mut c = pid(cfg);
+        let mut d = 0.0;
+        for k in 0..50 {
+            d = c.update(0.0, k as f32 * 24.0, 0.01).d;
+        }
+        assert!((d + 120.0).abs() < 0.5, "{d}");
+        // kd cleared while it moves, then the shaft stops, then kd comes back: D is 0.
+        c.set_config(PidConfig { kd: 0.0, ..cfg }).unwrap();
+        for _ in 0..5 {
+            c.update(0.0, 1200.0, 0.01);
+        }
+        c.set_config(cfg).unwrap();
+        assert_eq!(c.update(0.0, 1200.0, 0.01).d, 0.0);
+    }
+
+    #[test]
+    fn an_integral_gain_that_multiplies_to_zero_gives_no_nan() {
+        // The smallest ki there is; errors of f32::MAX twice (the target and measurement are
+        // 6e38 apart): their mean is f32::MAX, and ki · MAX · dt is a small number.
+        let mut c = pid(PidConfig::new(0.0, f32::from_bits(1), 0.0));
+        for _ in 0..3 {
+            let t = c.update(3e38, -3e38, DT);
+            assert!(t.output.is_finite() && t.i.is_finite(), "{t:?}");
+            assert!(t.output > 0.0, "{t:?}");
+        }
     }
 
     #[test]
@@ -879,10 +919,12 @@ mod tests {
             let t = c.update_within(100.0, 0.0, 0.0, DT, 5.0);
             assert!(t.output.abs() <= 5.0);
         }
-        assert!(c.integral() <= 5.0 + 1e-6, "integral {}", c.integral());
-        // Error reverses as soon as the limit is lifted: the output falls from at most 5 A.
+        // p = 0.1·100 = 10 is past the 5 A in force from the first step: no integral.
+        assert_eq!(c.integral(), 0.0);
+        // Error reverses as soon as the limit is lifted: p = −1, and the trapezoid
+        // (−10 + 100)/2 · 50 · 0.001 = 2.25 gives 1.25 A.
         let after = c.update_within(-10.0, 0.0, 0.0, DT, 20.0);
-        assert!(after.output < 5.0, "{}", after.output);
+        assert!((after.output - 1.25).abs() < 1e-5, "{}", after.output);
         // A NaN limit counts as zero.
         assert_eq!(c.update_within(100.0, 0.0, 0.0, DT, f32::NAN).output, 0.0);
     }

@@ -74,6 +74,12 @@ impl TrackingDifferentiator {
         };
     }
 
+    /// Takes over `previous`'s tracked value and rate (after a change of `r`, so that the
+    /// tracked value goes on from where it was instead of restarting).
+    pub(crate) fn continue_from(&mut self, previous: &Self) {
+        self.state = previous.state;
+    }
+
     /// Whether the tracker has a state (it was reset to a value or has seen an input).
     pub const fn is_started(&self) -> bool {
         self.state.is_some()
