@@ -38,7 +38,7 @@ use rc10_core::time::{Duration, Instant};
 pub const START_US: u64 = 1_000_000;
 
 /// Per-motor bookkeeping of what the application and the bus did to it.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct Track {
     /// The stamp of the last accepted feedback frame (one that keeps the motor online) since
     /// the last tick.
@@ -52,8 +52,9 @@ struct Track {
     mit: MitCommand,
     /// Damiao: the feed-forward torque.
     ff_nm: f32,
-    /// Damiao: a special command asked for and not yet sent.
-    special: Option<DmSpecial>,
+    /// Damiao: special commands asked for and not yet sent, oldest first (one goes out a
+    /// tick; a kind asked for again moves to the back).
+    special: std::collections::VecDeque<DmSpecial>,
 }
 
 impl Track {
@@ -63,7 +64,7 @@ impl Track {
         user_limit: f32::INFINITY,
         mit: MitCommand::ZERO_TORQUE,
         ff_nm: 0.0,
-        special: None,
+        special: std::collections::VecDeque::new(),
     };
 }
 
@@ -354,7 +355,8 @@ impl<'a> Harness<'a> {
                         DmSpecial::ClearError,
                     ][usize::from(k % 4)];
                     d.send_special(special);
-                    t.special = Some(special);
+                    t.special.retain(|&waiting| waiting != special);
+                    t.special.push_back(special);
                 }
                 (Ok(()), false)
             }
@@ -402,7 +404,7 @@ impl<'a> Harness<'a> {
                 MotorRef::Dji(_, info) => check_dji(&frames, &info, &state, &self.track[i], i),
                 MotorRef::Vesc(_, info) => check_vesc(&frames, &info, &state, &self.track[i], i),
                 MotorRef::Dm(d, info) => {
-                    let special = self.track[i].special.take();
+                    let special = self.track[i].special.pop_front();
                     check_dm(
                         &frames,
                         &info,

@@ -324,7 +324,9 @@ struct DmState {
     mode: ControlMode,
     target: f32,
     user_mit: MitCommand,
-    pending: Option<DmSpecial>,
+    /// Special commands waiting, oldest first; each kind at most once (so never more than
+    /// the four kinds).
+    pending: heapless::Vec<DmSpecial, 4>,
     status: DmStatus,
     position_rad: Option<f32>,
     wraps: i32,
@@ -403,7 +405,7 @@ impl DmMotor {
                 mode: ControlMode::Disabled,
                 target: 0.0,
                 user_mit: MitCommand::ZERO_TORQUE,
-                pending: None,
+                pending: heapless::Vec::new(),
                 status: DmStatus::Disabled,
                 position_rad: None,
                 wraps: 0,
@@ -450,9 +452,27 @@ impl DmMotor {
         Ok(())
     }
 
-    /// Sends `special` once, on the next tick, instead of that tick's MIT command.
+    /// Sends `special` once, on a coming tick, instead of that tick's MIT command: one special
+    /// a tick, in the order asked for (`ClearError` then `Enable` sends FB, then FC). A kind
+    /// asked for again while it still waits moves to the back, so at most the four kinds
+    /// wait and none is dropped.
+    ///
+    /// - `Disable` also disables the driver (as [`Motor::disable`]): auto-enable does not
+    ///   bring the motor back into motor mode until a new target is set.
+    /// - `SaveZero` makes the motor's present position its zero; the driver's multi-turn
+    ///   count starts afresh from the next reading (wraps so far and a software homing
+    ///   offset from [`Motor::set_total_angle_here_deg`] are cleared when FE is sent).
     pub fn send_special(&self, special: DmSpecial) {
-        self.state.lock(|s| s.borrow_mut().pending = Some(special));
+        self.state.lock(|s| {
+            let mut s = s.borrow_mut();
+            s.pending.retain(|&waiting| waiting != special);
+            // The other three kinds at most wait: there is room.
+            let _ = s.pending.push(special);
+            if special == DmSpecial::Disable {
+                s.mode = ControlMode::Disabled;
+                s.target = 0.0;
+            }
+        });
     }
 
     /// The motor's reported state.
@@ -616,13 +636,23 @@ impl CanNode for DmMotor {
             // What the packed field carries: clamped to ±t_max.
             let t_max = self.config.limits.t_max_nm;
             s.torque_ff_nm = crate::math::constrain(mit.torque_nm, -t_max, t_max);
-            s.out = if let Some(special) = s.pending.take() {
+            s.out = if let Some(special) = s.pending.first().copied() {
+                // Each kind waits at most once: this removes the first.
+                s.pending.retain(|&waiting| waiting != special);
+                if special == DmSpecial::SaveZero {
+                    s.wraps = 0;
+                    s.home_offset_rad = 0.0;
+                    s.position_rad = None;
+                }
+                // No torque is commanded on this tick.
+                s.torque_ff_nm = 0.0;
                 special.bytes()
             } else if self.config.auto_enable
                 && s.status == DmStatus::Disabled
                 && s.mode != ControlMode::Disabled
             {
                 // Also what brings a motor that has not answered yet into motor mode.
+                s.torque_ff_nm = 0.0;
                 DmSpecial::Enable.bytes()
             } else {
                 mit.pack(&self.config.limits)
@@ -940,13 +970,76 @@ mod tests {
         assert_eq!(packed(&m, T0), DmSpecial::Enable.bytes());
         m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
-        let expect = MitCommand {
-            velocity_rad_s: TAU,
-            kd: 1.0,
-            ..MitCommand::ZERO_TORQUE
+        // p 0 → (0 + 12.5)/25 · 65535 = 32767.5 → 0x7FFF; v 2π → (2π + 30)/60 · 4095 =
+        // 2476.3 → 0x9AC; kp 0; kd 1 → 1/5 · 4095 = 819 → 0x333; t 0 → 2047.5 → 0x7FF.
+        assert_eq!(
+            packed(&m, T0),
+            [0x7F, 0xFF, 0x9A, 0xC0, 0x00, 0x33, 0x37, 0xFF]
+        );
+    }
+
+    /// MIT with p, v, kp, kd and t all 0 (codes 0x7FFF, 0x7FF, 0, 0, 0x7FF), from the layout.
+    const ZERO_TORQUE_BYTES: [u8; 8] = [0x7F, 0xFF, 0x7F, 0xF0, 0x00, 0x00, 0x07, 0xFF];
+
+    fn special(last: u8) -> [u8; 8] {
+        [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, last]
+    }
+
+    #[test]
+    fn specials_asked_together_go_one_a_tick_in_order() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        // Over-current latched (state 0xA).
+        m.update_feedback(&feedback(0xA, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.send_special(DmSpecial::ClearError);
+        m.send_special(DmSpecial::Enable);
+        m.send_special(DmSpecial::ClearError); // again: it moves behind Enable
+        assert_eq!(packed(&m, T0), special(0xFC));
+        assert_eq!(packed(&m, T0), special(0xFB));
+        // Nothing waits any more, and no target is set: zero torque.
+        assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+    }
+
+    #[test]
+    fn a_disable_special_keeps_the_motor_limp_until_a_new_target() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.set_target_torque_nm(2.0).unwrap();
+        assert_ne!(packed(&m, T0), ZERO_TORQUE_BYTES);
+        m.send_special(DmSpecial::Disable);
+        assert_eq!(packed(&m, T0), special(0xFD));
+        assert_eq!(m.state().command, 0.0, "no torque went out with FD");
+        // The motor reports Disabled (state 0): no automatic Enable, no stiffness.
+        m.update_feedback(&feedback(0, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        for _ in 0..2 {
+            assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
         }
-        .pack(&MitLimits::DEFAULT);
-        assert_eq!(packed(&m, T0), expect);
+        assert_eq!(m.state().mode, ControlMode::Disabled);
+        m.set_target_rpm(10.0).unwrap();
+        assert_eq!(packed(&m, T0), special(0xFC));
+    }
+
+    #[test]
+    fn save_zero_starts_the_multi_turn_count_afresh() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        // One wrap forward (+12.5 rad end to the −12.5 rad end), then homed to 100°.
+        m.update_feedback(&feedback(1, 1, 0xFFF0, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.update_feedback(&feedback(1, 1, 0x0010, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.set_total_angle_here_deg(100.0).unwrap();
+        packed(&m, T0);
+        assert!((m.total_angle_deg().unwrap() - 100.0).abs() < 0.01);
+        m.send_special(DmSpecial::SaveZero);
+        assert_eq!(packed(&m, T0), special(0xFE));
+        // The motor now reports about 0 (code 0x7FFF: −0.0002 rad): so does the driver.
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let total = m.total_angle_deg().unwrap();
+        assert!(total.abs() < 0.1, "{total}");
+        assert_eq!(m.set_target_total_angle_deg(0.0), Ok(()));
     }
 
     #[test]
@@ -968,10 +1061,7 @@ mod tests {
             .unwrap();
         m.set_target_torque_nm(5.0).unwrap();
         let later = T0 + crate::time::Duration::from_millis(200);
-        assert_eq!(
-            packed(&m, later),
-            MitCommand::ZERO_TORQUE.pack(&MitLimits::DEFAULT)
-        );
+        assert_eq!(packed(&m, later), ZERO_TORQUE_BYTES);
         assert!(!m.is_online());
     }
 
