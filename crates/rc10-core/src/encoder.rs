@@ -65,6 +65,12 @@ impl GearRatio {
         self.output_turns
     }
 
+    /// Whether the rotor and the output turn together (1:1, also when written 2:2; `==`
+    /// compares the written terms).
+    pub const fn is_direct(&self) -> bool {
+        self.rotor_turns == self.output_turns
+    }
+
     /// The ratio `rotor speed / output speed` as a float (for speed conversions).
     pub fn as_f32(&self) -> f32 {
         self.rotor_turns as f32 / self.output_turns as f32

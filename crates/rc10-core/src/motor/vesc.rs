@@ -17,10 +17,16 @@
 //! and clamps every command to the configured limits before the integer conversion.
 //!
 //! RC10_LIB turned an eRPM target of 0 into a hard brake. Here that is an explicit option,
-//! [`VescConfig::zero_speed_brake_amps`]: `Some(amps)` sends `SET_CURRENT_BRAKE` instead of
-//! `SET_RPM 0` (holds a wheel still without the speed loop's hunting); `None` (default) sends
-//! `SET_RPM 0`. While offline or disabled the driver sends `SET_CURRENT 0`, which releases the
-//! motor.
+//! [`VescConfig::zero_speed_brake_amps`]: `Some(amps)` sends `SET_CURRENT_BRAKE` with that
+//! current (a braking torque you choose) whenever the speed command would reach the wire as
+//! eRPM 0; `None` (default) sends `SET_RPM 0`. While offline or disabled the driver sends
+//! `SET_CURRENT 0`, which releases the motor.
+//!
+//! Slow speeds: the VESC firmware's speed loop does not run below its minimum eRPM (VESC Tool
+//! "Minimum ERPM", 900 by default, vedderb/bldc): it brakes instead. An output target below
+//! `min ERPM / (pole pairs × gear ratio)` rpm (e.g. 900 / 7 ≈ 129 rpm for a 7-pole-pair hub
+//! motor in direct drive) therefore stops the wheel rather than turning it slowly. Lower that
+//! setting in VESC Tool, or drive slow motion with current or position targets.
 
 use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
 use crate::can::{CanFrame, IdFilter};
@@ -168,7 +174,8 @@ pub struct VescConfig {
     pub max_brake_amps: f32,
     /// Output-shaft speed targets are clamped to ±this, in rpm.
     pub max_speed_rpm: f32,
-    /// Send a brake current (amps) instead of `SET_RPM 0` for a zero speed target.
+    /// Send a brake current (amps) instead of `SET_RPM 0` for a speed target that reaches the
+    /// wire as eRPM 0 (below half an eRPM).
     pub zero_speed_brake_amps: Option<f32>,
     /// Frames per second the VESC sends of each status packet (VESC Tool, "CAN status rate").
     pub status_hz: u32,
@@ -419,7 +426,10 @@ impl VescMotor {
             ControlMode::Speed => {
                 let rpm = saturate(s.target, c.max_speed_rpm);
                 match c.zero_speed_brake_amps {
-                    Some(b) if rpm == 0.0 => VescCommand::Brake(saturate(b, c.max_brake_amps)),
+                    // Rounded half away from zero on the wire: below half an eRPM it is 0.
+                    Some(b) if (rpm * c.erpm_per_rpm()).abs() < 0.5 => {
+                        VescCommand::Brake(saturate(b, c.max_brake_amps))
+                    }
                     _ => VescCommand::Erpm(rpm * c.erpm_per_rpm()),
                 }
             }
@@ -530,7 +540,7 @@ impl Motor for VescMotor {
     /// Position control uses the VESC's rotor position loop, so it is an output-shaft angle
     /// only for direct drive; geared VESC motors report [`TargetError::Unsupported`].
     fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
-        if self.config.gear != GearRatio::DIRECT {
+        if !self.config.gear.is_direct() {
             return Err(TargetError::Unsupported);
         }
         self.set(ControlMode::Angle, angle_deg, None, None)
@@ -581,7 +591,7 @@ impl Motor for VescMotor {
                 target: s.target,
                 speed_rpm: s.erpm / self.config.erpm_per_rpm(),
                 // STATUS_4's PID position is the rotor's: an output angle only in direct drive.
-                angle_deg: if self.config.gear == GearRatio::DIRECT {
+                angle_deg: if self.config.gear.is_direct() {
                     s.pid_position_deg.map(wrap_deg_360)
                 } else {
                     None
@@ -693,6 +703,23 @@ mod tests {
         braking.set_target_rpm(0.0).unwrap();
         // SET_CURRENT_BRAKE (2), 5000 mA = 0x1388.
         assert_eq!(packed(&braking), (0x0203, vec![0, 0, 0x13, 0x88]));
+        // 0.07 rpm × 7 pole pairs = 0.49 eRPM: 0 on the wire, so the brake too.
+        braking.set_target_rpm(0.07).unwrap();
+        assert_eq!(packed(&braking), (0x0203, vec![0, 0, 0x13, 0x88]));
+        // 0.08 rpm = 0.56 eRPM: SET_RPM 1.
+        braking.set_target_rpm(-0.08).unwrap();
+        assert_eq!(packed(&braking), (0x0303, vec![0xFF, 0xFF, 0xFF, 0xFF]));
+    }
+
+    #[test]
+    fn a_ratio_written_2_to_2_is_direct_drive() {
+        let mut cfg = VescConfig::new(7);
+        cfg.gear = GearRatio::new(2, 2).unwrap();
+        let m = VescMotor::new(3, cfg).unwrap();
+        online(&m);
+        assert_eq!(m.set_target_angle_deg(90.0), Ok(()));
+        // SET_POS (4): 90 000 000 = 0x055D_4A80.
+        assert_eq!(packed(&m), (0x0403, vec![0x05, 0x5D, 0x4A, 0x80]));
     }
 
     #[test]
