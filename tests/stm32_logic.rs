@@ -18,15 +18,15 @@ use rc10_core::node::CanNode;
 #[test]
 fn psr_flags_map_to_the_fault_confinement_state() {
     assert_eq!(
-        status::bus_status(false, false, 0, 0, 0).state,
+        status::bus_status(false, false, 0, 0, 0, 0).state,
         ErrorState::Active
     );
     assert_eq!(
-        status::bus_status(false, true, 0, 130, 0).state,
+        status::bus_status(false, true, 0, 0, 130, 0).state,
         ErrorState::Passive
     );
     // Bus-off wins over error-passive (both flags are set while off the bus).
-    let off = status::bus_status(true, true, 3, 255, 12);
+    let off = status::bus_status(true, true, 3, 0, 255, 12);
     assert_eq!(off.state, ErrorState::BusOff);
     assert_eq!((off.tx_error_count, off.rx_error_count), (255, 12));
 }
@@ -34,13 +34,20 @@ fn psr_flags_map_to_the_fault_confinement_state() {
 #[test]
 fn last_error_codes_1_to_6_are_protocol_errors_0_and_7_are_not() {
     for lec in 0..=7u8 {
-        let expected = (1..=6).contains(&lec);
-        assert_eq!(
-            status::bus_status(false, false, lec, 0, 0).protocol_error,
-            expected,
-            "LEC {lec}"
-        );
+        let s = status::bus_status(false, false, lec, 0, 0, 0);
+        assert_eq!(s.protocol_error, (1..=6).contains(&lec), "LEC {lec}");
+        assert_eq!(s.errors_logged, 0, "LEC {lec}");
     }
+}
+
+#[test]
+fn the_error_log_is_the_count_of_errors() {
+    // 17 errors logged since the last read, each retried successfully (LEC cleared by the
+    // good frame after them, TEC back near 0).
+    let noisy = status::bus_status(false, false, 0, 17, 8, 0);
+    assert_eq!((noisy.protocol_error, noisy.errors_logged), (true, 17));
+    let full = status::bus_status(false, false, 7, 255, 0, 0);
+    assert_eq!(full.errors_logged, 255);
 }
 
 #[test]

@@ -206,7 +206,7 @@ impl CanTransmit for FdcanTx {
     }
 
     fn status(&self) -> BusStatus {
-        // The one read of PSR (it clears LEC): mode and last error together.
+        // The one read of each: reading PSR clears LEC, reading ECR resets CEL.
         let psr = self.regs.psr().read();
         let ecr = self.regs.ecr().read();
         self.bus_off.set(psr.bo());
@@ -214,6 +214,7 @@ impl CanTransmit for FdcanTx {
             psr.bo(),
             psr.ep(),
             psr.lec().to_bits(),
+            ecr.cel(),
             ecr.tec(),
             ecr.rec(),
         )
@@ -259,21 +260,24 @@ impl CanReceive for FdcanRx {
         if self.take_message_lost() {
             return Err(ReceiveError::Overrun);
         }
-        match self.rx.read().await {
-            Ok(envelope) => {
-                let timestamp = Instant::now();
-                let Some(frame) = from_hal(&envelope.frame) else {
-                    return Err(ReceiveError::BusError); // unreachable for classic frames
-                };
-                let received = Received { frame, timestamp };
-                if self.take_message_lost() {
-                    self.held = Some(received);
-                    return Err(ReceiveError::Overrun);
+        loop {
+            match self.rx.read().await {
+                Ok(envelope) => {
+                    let timestamp = Instant::now();
+                    let Some(frame) = from_hal(&envelope.frame) else {
+                        return Err(ReceiveError::BusError); // unreachable for classic frames
+                    };
+                    let received = Received { frame, timestamp };
+                    if self.take_message_lost() {
+                        self.held = Some(received);
+                        return Err(ReceiveError::Overrun);
+                    }
+                    return Ok(received);
                 }
-                Ok(received)
+                // A protocol error the driver read from PSR.LEC: the transmit side's
+                // `status` counts errors from ECR.CEL (every error, once). Read on.
+                Err(_protocol_error) => {}
             }
-            // A protocol error the driver read from PSR.LEC (bus-off is seen by `status`).
-            Err(_protocol_error) => Err(ReceiveError::BusError),
         }
     }
 }

@@ -5,11 +5,22 @@
 use rc10_core::can::{BusStatus, ErrorState};
 
 /// The status the transport reports, from PSR's bus-off (`BO`) and error-passive (`EP`)
-/// flags, its last-error code (`LEC`) and ECR's counters.
+/// flags and last-error code (`LEC`), and ECR's error counters and error log (`CEL`:
+/// protocol errors that moved TEC or REC since ECR was last read, stopping at 255).
 ///
-/// `LEC` values 1–6 are protocol errors (stuff, form, ACK, bit 1, bit 0, CRC); 0 is "no
-/// error" and 7 "no change since the last read" (the register clears it on read).
-pub fn bus_status(bus_off: bool, error_passive: bool, lec: u8, tec: u8, rec: u8) -> BusStatus {
+/// The error log counts the errors: `LEC` holds one error, and a frame sent or received
+/// without error clears it, so errors the controller retried successfully between two 1 kHz
+/// reads would not be seen. `LEC` values 1–6 (stuff, form, ACK, bit 1, bit 0, CRC; 0 is "no
+/// error", 7 "no change since the last read") still mark an error where the log does not
+/// move: ACK errors while error-passive leave TEC, and so `CEL`, as they are.
+pub fn bus_status(
+    bus_off: bool,
+    error_passive: bool,
+    lec: u8,
+    cel: u8,
+    tec: u8,
+    rec: u8,
+) -> BusStatus {
     let state = if bus_off {
         ErrorState::BusOff
     } else if error_passive {
@@ -21,7 +32,8 @@ pub fn bus_status(bus_off: bool, error_passive: bool, lec: u8, tec: u8, rec: u8)
         state,
         tx_error_count: tec,
         rx_error_count: rec,
-        protocol_error: (1..=6).contains(&lec),
+        protocol_error: cel > 0 || (1..=6).contains(&lec),
+        errors_logged: cel,
     }
 }
 

@@ -569,8 +569,10 @@ impl<'a, const N: usize> Bus<'a, N> {
             self.stats.record_tx_stale(u32::from(stale));
         }
         let status = tx.status();
-        if status.protocol_error {
-            self.stats.record_bus_error();
+        // Every error the controller logged, or one for a bare "there was an error".
+        let errors = status.errors_logged.max(u8::from(status.protocol_error));
+        if errors > 0 {
+            self.stats.record_bus_errors(u32::from(errors));
         }
         let mut bus_off = status.state == ErrorState::BusOff;
         let mut report = TransmitReport::default();
@@ -718,7 +720,7 @@ impl TickSource for TickerTicks {
 pub struct PacedTick {
     /// Seconds since the previous tick, within `[period / 2, 10 · period]`.
     pub dt_s: f32,
-    /// Whether the tick source must be re-synchronised (this tick was late by half a period
+    /// Whether the tick source must be re-synchronised (this tick was late by a whole period
     /// or more, so the ticks that fell due meanwhile are skipped rather than run back to back).
     pub resync: bool,
     /// Whole periods skipped by that re-synchronisation.
@@ -731,10 +733,12 @@ pub struct PacedTick {
 /// embassy-time's `Ticker` (like a FreeRTOS `vTaskDelayUntil` loop) fires ticks it missed
 /// during a stall back to back, a few microseconds apart. Control loops would then see a burst
 /// of tiny `dt`s (D terms spike) and the bus a burst of commands. The pacer tracks when the
-/// next tick is due; a tick that starts half a period or more after that is *late*: the source
-/// is re-synchronised (the missed ticks are skipped and counted) and the next tick comes one
-/// period later. Every `dt` is therefore at least half a period, and at most ten periods
-/// after a long stall ([`DeltaTime`] bounds it).
+/// next tick is due; a tick that starts a whole period or more after that is *late*: a tick
+/// fell due meanwhile, so the source is re-synchronised (the missed ticks are skipped and
+/// counted) and the next tick comes one period later. A tick less than a period late keeps
+/// the schedule: a task that always wakes 0.6 ms late still ticks at 1 kHz (re-synchronising
+/// it would stretch every period to 1.6 ms). Every `dt` lies within half a period and ten
+/// periods ([`DeltaTime`] bounds it).
 ///
 /// ```
 /// use rc10_core::bus::TickPacer;
@@ -781,8 +785,8 @@ impl TickPacer {
             None => (true, 0),
             Some(due) => {
                 let late = now.saturating_duration_since(due).as_ticks();
-                // `late · 2 ≥ period`, without overflowing for a timestamp far ahead.
-                if late >= self.period.get().div_ceil(2) {
+                // A tick fell due before this one started.
+                if late >= self.period.get() {
                     let missed = late / self.period;
                     (true, u32::try_from(missed).unwrap_or(u32::MAX))
                 } else {

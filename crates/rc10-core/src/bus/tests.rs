@@ -247,6 +247,7 @@ fn bus_off_is_counted_once_per_entry_and_frames_not_queued() {
         tx_error_count: 255,
         rx_error_count: 0,
         protocol_error: true,
+        errors_logged: 0,
     });
     let mut batch = TxBatch::new();
     for _ in 0..3 {
@@ -255,12 +256,40 @@ fn bus_off_is_counted_once_per_entry_and_frames_not_queued() {
     }
     let c = bus.stats().snapshot();
     assert_eq!((c.bus_off_events, c.tx_bus_off, c.tx_frames), (1, 3, 0));
-    assert_eq!(c.bus_errors, 3); // the protocol error flag of each status read
+    // The transport cannot count its errors: one for each status read that saw one.
+    assert_eq!(c.bus_errors, 3);
     assert!(bus.stats().is_bus_off());
     tx.set_status(BusStatus::default());
     bus.transmit(&batch, &mut tx);
     assert!(!bus.stats().is_bus_off());
     assert_eq!(bus.stats().snapshot().tx_frames, 1);
+}
+
+#[test]
+fn every_error_the_controller_logged_is_counted() {
+    let m = DjiMotor::m3508(1).unwrap();
+    let mut builder = BusBuilder::<1>::new();
+    builder.register(&m).unwrap();
+    let bus = builder.build();
+    let mut tx = TxQueue::<3>::new();
+    // A loose connector: 17 errors between two reads, each retried successfully.
+    tx.set_status(BusStatus {
+        protocol_error: true,
+        errors_logged: 17,
+        ..BusStatus::default()
+    });
+    let mut batch = TxBatch::new();
+    for _ in 0..3 {
+        bus.tick(T0, 0.001, &mut batch);
+        bus.transmit(&batch, &mut tx);
+        tx.pop();
+    }
+    assert_eq!(bus.stats().snapshot().bus_errors, 51);
+    assert_eq!(
+        bus.stats().snapshot().tx_frames,
+        3,
+        "error-active: frames still go out"
+    );
 }
 
 #[test]

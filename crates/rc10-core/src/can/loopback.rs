@@ -31,6 +31,7 @@ impl<const DEPTH: usize> TxQueue<DEPTH> {
                 tx_error_count: 0,
                 rx_error_count: 0,
                 protocol_error: false,
+                errors_logged: 0,
             },
         }
     }

@@ -1,9 +1,11 @@
 //! Per-bus statistics: cumulative counters readable at any time from any task, and per-second
 //! rates (frames/s, bus load %) latched by the scheduler tick.
 //!
-//! Counters are `AtomicU32`s (native on Cortex-M4; they wrap after 2^32 events, about 50 days
-//! of 1 kHz frames on eight motors, so compare snapshots with wrapping subtraction as
-//! [`BusCounters::since`] does). Rates are computed from two snapshots one window apart.
+//! Counters are `AtomicU32`s (native on Cortex-M4) and wrap after 2^32: a frame counter at a
+//! full bus's 6,000 frames/s after about 8 days, a bit counter at its 666 kbit/s after about
+//! 1.8 hours. Compare snapshots with wrapping subtraction, as [`BusCounters::since`] does,
+//! taken less than that apart (the 1 s rate windows are far within it). Rates are computed
+//! from two snapshots one window apart.
 
 #[cfg(doc)]
 use super::timing;
@@ -80,6 +82,9 @@ impl BusStats {
     }
     pub(crate) fn record_bus_error(&self) {
         bump!(self.bus_errors);
+    }
+    pub(crate) fn record_bus_errors(&self, n: u32) {
+        bump!(self.bus_errors, n);
     }
     pub(crate) fn record_tx(&self, bits: u32) {
         bump!(self.tx_frames);
@@ -174,7 +179,10 @@ pub struct BusCounters {
     pub rx_rejected: u32,
     /// RX FIFO overruns reported by the transport.
     pub rx_overruns: u32,
-    /// Bus protocol errors reported by the transport.
+    /// Bus protocol errors (stuff, form, ACK, bit, CRC): every error the controller logged
+    /// ([`BusStatus::errors_logged`](super::BusStatus::errors_logged), FDCAN's error log), or
+    /// one per status read that saw an error where the controller cannot count them, plus
+    /// [`ReceiveError::BusError`](super::ReceiveError::BusError)s from the receiver.
     pub bus_errors: u32,
     /// Frames queued into the transport's TX buffers. Queued is not yet on the wire: a frame
     /// that is never acknowledged (no node on the bus) stays queued and is retransmitted.

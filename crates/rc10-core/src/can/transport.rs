@@ -83,10 +83,15 @@ pub struct BusStatus {
     /// Receive error counter (0–127, 128 meaning "passive").
     pub rx_error_count: u8,
     /// Whether the controller recorded a protocol error (stuff, form, ACK, bit, CRC) since
-    /// the last status read. Counted in `bus_errors` by the bus. Controllers whose error code
-    /// clears on read (FDCAN's PSR.LEC) report each error once, here or through
-    /// [`ReceiveError::BusError`], whichever reads it first.
+    /// the last status read.
     pub protocol_error: bool,
+    /// How many protocol errors the controller logged since the last status read, where it
+    /// counts them (FDCAN: ECR.CEL, reset by the read, stopping at 255); 0 where it cannot
+    /// tell. The bus adds this to `bus_errors`, or 1 for `protocol_error` when this is 0.
+    /// (A last-error code such as FDCAN's PSR.LEC shows one error at most and is cleared by
+    /// the next good frame: errors that were retried successfully within a tick only show
+    /// here.)
+    pub errors_logged: u8,
 }
 
 /// A received frame and its timestamp (see the module docs: possibly the time it was read).
