@@ -53,7 +53,7 @@ struct Track {
     /// Damiao: the feed-forward torque.
     ff_nm: f32,
     /// Damiao: special commands asked for and not yet sent, oldest first (one goes out a
-    /// tick; a kind asked for again moves to the back).
+    /// tick while online; a kind asked for again keeps its place).
     special: std::collections::VecDeque<DmSpecial>,
 }
 
@@ -355,8 +355,9 @@ impl<'a> Harness<'a> {
                         DmSpecial::ClearError,
                     ][usize::from(k % 4)];
                     d.send_special(special);
-                    t.special.retain(|&waiting| waiting != special);
-                    t.special.push_back(special);
+                    if !t.special.contains(&special) {
+                        t.special.push_back(special);
+                    }
                 }
                 (Ok(()), false)
             }
@@ -404,7 +405,12 @@ impl<'a> Harness<'a> {
                 MotorRef::Dji(_, info) => check_dji(&frames, &info, &state, &self.track[i], i),
                 MotorRef::Vesc(_, info) => check_vesc(&frames, &info, &state, &self.track[i], i),
                 MotorRef::Dm(d, info) => {
-                    let special = self.track[i].special.pop_front();
+                    // Specials wait while the motor is offline.
+                    let special = if state.online {
+                        self.track[i].special.pop_front()
+                    } else {
+                        None
+                    };
                     check_dm(
                         &frames,
                         &info,

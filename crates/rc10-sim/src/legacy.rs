@@ -7,7 +7,7 @@ use rc10_core::encoder::GearRatio;
 use rc10_core::motor::dji::DjiMotor;
 use rc10_core::motor::{ControlMode, Motor, MotorState, TargetError};
 use rc10_core::node::{BusUsage, CanNode, FrameError, TxBatch};
-use rc10_core::pid::{IncrementalPid, IncrementalPidConfig};
+use rc10_core::pid::IncrementalPidConfig;
 use rc10_core::time::Instant;
 use std::sync::Mutex;
 
@@ -23,25 +23,53 @@ pub struct LegacyM3508 {
     loop_state: Mutex<LoopState>,
 }
 
-/// RC10_LIB's loop: PID, target, and whether the error history has been zeroed.
-#[derive(Debug)]
+/// RC10_LIB's loop: its PID and the target.
+#[derive(Debug, Default)]
 struct LoopState {
-    pid: IncrementalPid,
+    pid: LegacyPid,
     target: Option<f32>,
-    primed: bool,
+}
+
+/// RC10_LIB's incremental PID step as this comparison reproduces it, kept apart from rc10's
+/// own [`IncrementalPid`](rc10_core::pid::IncrementalPid), which differs on purpose: the
+/// error history starts at zero (the first step kicks by kp·e) and shifts on every call,
+/// inside the deadband too (rc10 leaves it alone there), while the output moves only
+/// outside the band.
+#[derive(Debug, Default)]
+struct LegacyPid {
+    /// Output, mA.
+    output: f32,
+    /// The previous two errors, rpm.
+    history: (f32, f32),
+}
+
+impl LegacyPid {
+    /// One step with [`RC10_DEMO_SPEED_PID`]; returns the output in mA.
+    fn step(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
+        let c = RC10_DEMO_SPEED_PID;
+        let e = target - measurement;
+        let (e1, e2) = self.history;
+        if dt_s > 0.0 && e.abs() > c.deadband {
+            let p = c.kp * (e - e1);
+            let i = c.ki * e * dt_s;
+            let d = if c.kd == 0.0 {
+                0.0
+            } else {
+                c.kd * (e - 2.0 * e1 + e2) / dt_s
+            };
+            self.output = (self.output + p + i + d).clamp(-c.output_limit, c.output_limit);
+        }
+        self.history = (e, e1);
+        self.output
+    }
 }
 
 impl LegacyM3508 {
     /// An M3508 with ESC id `esc_id`, or `None` for an invalid id.
     pub fn new(esc_id: u8) -> Option<Self> {
-        let pid = IncrementalPid::new(RC10_DEMO_SPEED_PID).ok()?;
         Some(Self {
             inner: DjiMotor::m3508(esc_id).ok()?,
-            loop_state: Mutex::new(LoopState {
-                pid,
-                target: None,
-                primed: false,
-            }),
+            loop_state: Mutex::new(LoopState::default()),
         })
     }
 
@@ -71,20 +99,7 @@ impl CanNode for LegacyM3508 {
         let rpm = self.inner.speed_rpm();
         let milliamps = self.with_loop(|l| {
             let t = l.target?;
-            if !l.primed {
-                // RC10_LIB's error history starts at zero, so its first step kicks by kp·e.
-                // rc10's controller starts from the present error and leaves its history
-                // alone inside the deadband: prime it with a zero error under no deadband
-                // (no output), then restore the demo's band.
-                let _ = l.pid.set_config(IncrementalPidConfig {
-                    deadband: 0.0,
-                    ..RC10_DEMO_SPEED_PID
-                });
-                l.pid.update(0.0, 0.0, dt_s);
-                let _ = l.pid.set_config(RC10_DEMO_SPEED_PID);
-                l.primed = true;
-            }
-            Some(l.pid.update(t, rpm, dt_s).output)
+            Some(l.pid.step(t, rpm, dt_s))
         });
         if let Some(ma) = milliamps {
             let _ = self.inner.set_target_current(ma / 1000.0);
@@ -121,9 +136,7 @@ impl Motor for LegacyM3508 {
 
     fn disable(&self) {
         self.with_loop(|l| {
-            l.pid.reset();
-            l.target = None;
-            l.primed = false;
+            *l = LoopState::default();
         });
         self.inner.disable();
     }
@@ -139,5 +152,23 @@ impl Motor for LegacyM3508 {
 
     fn gear_ratio(&self) -> GearRatio {
         self.inner.gear_ratio()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_comparison_pid_kicks_on_its_first_step_and_shifts_history_inside_the_band() {
+        let mut pid = LegacyPid::default();
+        // From a zero history: P = 18 · 300, I = 15 · 300 · 0.001.
+        assert!((pid.step(300.0, 0.0, 0.001) - 5404.5).abs() < 1e-3);
+        let mut pid = LegacyPid::default();
+        pid.step(7.0, 0.0, 0.001); // 18 · 7 + 15 · 7 · 0.001 = 126.105
+        // Inside the band: no output change, but the history takes the 3.
+        assert!((pid.step(3.0, 0.0, 0.001) - 126.105).abs() < 1e-3);
+        // Out again at 7: P = 18 · (7 − 3) = 72, I = 0.105.
+        assert!((pid.step(7.0, 0.0, 0.001) - 198.21).abs() < 1e-3);
     }
 }

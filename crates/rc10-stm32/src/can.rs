@@ -17,10 +17,16 @@
 //!   derived at read time, with a tick length that is not the counter's); it is not used.
 //!   Frames are stamped with embassy-time when the receiver reads them: up to the receiver's
 //!   latency late, which rc10-core's consumers allow for.
-//! - **Status in one place.** `PSR` clears its last-error code on read; only
-//!   [`FdcanTx::status`] reads it (once per tick), and reports bus-off, error-passive and a
-//!   protocol error seen since the last read. (The driver's own receive path also reads it
-//!   when its FIFOs are empty: an error is then reported by whichever reads first.)
+//! - **Status in one place.** [`FdcanTx::status`] (once per tick) reports bus-off,
+//!   error-passive, the error counters and the number of protocol errors the controller
+//!   logged since the last read (`ECR.CEL`, reset by the read), so an error the controller
+//!   retried successfully within the millisecond is counted too. `PSR`'s last-error code
+//!   shows one error at most and is cleared by the next good frame and by reading it; it
+//!   still marks errors that leave `CEL` alone (ACK errors while error-passive). The
+//!   driver's own receive path also reads `PSR` when its FIFOs are empty and reports the
+//!   code as an error: the receiver reads on instead, so nothing is counted twice. (An ACK
+//!   error it consumed that way goes uncounted; ACK errors come from nobody acknowledging,
+//!   when nothing is received either.)
 //! - **RX overrun.** The driver does not report lost messages. The receiver reads the
 //!   FIFOs' message-lost interrupt flags (`IR.RF0L`, `IR.RF1L`) through the register API and
 //!   clears them (write-1-to-clear, which touches no other flag), reporting

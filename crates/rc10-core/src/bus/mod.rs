@@ -515,7 +515,9 @@ impl<'a, const N: usize> Bus<'a, N> {
     }
 
     /// Rates over the last complete [`BusConfig::rate_window`] (zero before one has
-    /// completed). Computed here, in the caller's task, from the counts the tick latched.
+    /// completed). Computed here, in the caller's task, from the counts the tick latched: if
+    /// the scheduler stops ticking, the last window stays (compare
+    /// [`BusCounters`](crate::can::BusCounters) snapshots to see that nothing moves).
     pub fn rates(&self) -> BusRates {
         // Copied out under the lock, computed after it.
         match self.window.lock(|w| w.borrow().latched()) {
@@ -720,7 +722,7 @@ impl TickSource for TickerTicks {
 pub struct PacedTick {
     /// Seconds since the previous tick, within `[period / 2, 10 · period]`.
     pub dt_s: f32,
-    /// Whether the tick source must be re-synchronised (this tick was late by a whole period
+    /// Whether the tick source must be re-synchronised (this tick was late by half a period
     /// or more, so the ticks that fell due meanwhile are skipped rather than run back to back).
     pub resync: bool,
     /// Whole periods skipped by that re-synchronisation.
@@ -733,12 +735,16 @@ pub struct PacedTick {
 /// embassy-time's `Ticker` (like a FreeRTOS `vTaskDelayUntil` loop) fires ticks it missed
 /// during a stall back to back, a few microseconds apart. Control loops would then see a burst
 /// of tiny `dt`s (D terms spike) and the bus a burst of commands. The pacer tracks when the
-/// next tick is due; a tick that starts a whole period or more after that is *late*: a tick
-/// fell due meanwhile, so the source is re-synchronised (the missed ticks are skipped and
-/// counted) and the next tick comes one period later. A tick less than a period late keeps
-/// the schedule: a task that always wakes 0.6 ms late still ticks at 1 kHz (re-synchronising
-/// it would stretch every period to 1.6 ms). Every `dt` lies within half a period and ten
-/// periods ([`DeltaTime`] bounds it).
+/// next tick is due; a tick that starts half a period or more after that is *late*: the source
+/// is re-synchronised (the missed ticks are skipped and counted) and the next tick comes one
+/// period later. Ticks are therefore never closer than half a period, and every `dt` is at
+/// most ten periods after a long stall ([`DeltaTime`] bounds it).
+///
+/// The price of that spacing: a scheduler task that *always* wakes half a period or more
+/// late (its executor busy with other work at every tick) runs slower, each period stretched
+/// by its lateness (0.6 ms late at 1 kHz: every 1.6 ms), with a true `dt` and with no tick
+/// counted as skipped (no whole period passed unserved). Give the scheduler its own
+/// higher-priority executor (`InterruptExecutor`) so that it wakes on time.
 ///
 /// ```
 /// use rc10_core::bus::TickPacer;
@@ -785,8 +791,8 @@ impl TickPacer {
             None => (true, 0),
             Some(due) => {
                 let late = now.saturating_duration_since(due).as_ticks();
-                // A tick fell due before this one started.
-                if late >= self.period.get() {
+                // `late · 2 ≥ period`, without overflowing for a timestamp far ahead.
+                if late >= self.period.get().div_ceil(2) {
                     let missed = late / self.period;
                     (true, u32::try_from(missed).unwrap_or(u32::MAX))
                 } else {

@@ -192,7 +192,9 @@ pub struct BusCounters {
     /// Frames not queued because the TX buffers were full.
     pub tx_full: u32,
     /// Frames found still waiting in the TX buffers at the start of a later tick (sent late;
-    /// see [`CanTransmit::still_queued`](super::CanTransmit::still_queued)).
+    /// see [`CanTransmit::still_queued`](super::CanTransmit::still_queued)), counted at every
+    /// tick that finds them: a frame that waits three ticks counts three (frame-ticks of
+    /// delay, so it can exceed the frames queued while nobody acknowledges).
     pub tx_stale: u32,
     /// Frames not queued because the controller was bus-off.
     pub tx_bus_off: u32,
@@ -288,8 +290,12 @@ pub struct BusRates {
     pub tx_frames_per_s: f32,
     /// Frames dropped on the TX side per second.
     pub tx_dropped_per_s: f32,
-    /// Share of the bus's bit time used by the frames this node saw and sent, in percent,
-    /// counted without stuff bits: the true load is up to a fifth higher.
+    /// Share of the bus's bit time used by the frames this node received and queued, in
+    /// percent, counted without stuff bits: the true load is up to a fifth higher. What the
+    /// node does not see is not in it: retransmissions, error frames, frames its acceptance
+    /// filters reject, and frames refused while the TX buffers are full. So it reads low,
+    /// not high, when the bus is in trouble (nobody acknowledging: near 0 % while the
+    /// controller retransmits all the time); read it with `bus_errors` and `tx_full`.
     pub load_percent: f32,
 }
 

@@ -452,22 +452,25 @@ impl DmMotor {
         Ok(())
     }
 
-    /// Sends `special` once, on a coming tick, instead of that tick's MIT command: one special
-    /// a tick, in the order asked for (`ClearError` then `Enable` sends FB, then FC). A kind
-    /// asked for again while it still waits moves to the back, so at most the four kinds
-    /// wait and none is dropped.
+    /// Sends `special` once, on a coming tick while the motor is online, instead of that
+    /// tick's MIT command: one special a tick, in the order asked for (`ClearError` then
+    /// `Enable` sends FB, then FC). A kind asked for again while it still waits keeps its
+    /// place, so at most the four kinds wait, none is dropped and none is starved. While the
+    /// motor is offline the specials wait (sent into silence they would be lost).
     ///
     /// - `Disable` also disables the driver (as [`Motor::disable`]): auto-enable does not
     ///   bring the motor back into motor mode until a new target is set.
     /// - `SaveZero` makes the motor's present position its zero; the driver's multi-turn
     ///   count starts afresh from the next reading (wraps so far and a software homing
-    ///   offset from [`Motor::set_total_angle_here_deg`] are cleared when FE is sent).
+    ///   offset from [`Motor::set_total_angle_here_deg`] are cleared when FE is sent; a
+    ///   homing asked for before then applies to the first reading after it).
     pub fn send_special(&self, special: DmSpecial) {
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
-            s.pending.retain(|&waiting| waiting != special);
-            // The other three kinds at most wait: there is room.
-            let _ = s.pending.push(special);
+            if !s.pending.contains(&special) {
+                // The other three kinds at most wait: there is room.
+                let _ = s.pending.push(special);
+            }
             if special == DmSpecial::Disable {
                 s.mode = ControlMode::Disabled;
                 s.target = 0.0;
@@ -620,6 +623,23 @@ impl CanNode for DmMotor {
                 s.awaiting_return = true;
             }
             let online = s.liveness.is_online();
+            // A special goes to a motor that answers; while offline it waits.
+            let special = if online {
+                s.pending.first().copied()
+            } else {
+                None
+            };
+            if let Some(special) = special {
+                // Each kind waits at most once: this removes the first.
+                s.pending.retain(|&waiting| waiting != special);
+                if special == DmSpecial::SaveZero {
+                    // Before the homing below: a homing asked for with it waits for the
+                    // first reading after the new zero.
+                    s.wraps = 0;
+                    s.home_offset_rad = 0.0;
+                    s.position_rad = None;
+                }
+            }
             if let Some(deg) = s.pending_home_deg
                 && s.position_rad.is_some()
             {
@@ -636,14 +656,7 @@ impl CanNode for DmMotor {
             // What the packed field carries: clamped to ±t_max.
             let t_max = self.config.limits.t_max_nm;
             s.torque_ff_nm = crate::math::constrain(mit.torque_nm, -t_max, t_max);
-            s.out = if let Some(special) = s.pending.first().copied() {
-                // Each kind waits at most once: this removes the first.
-                s.pending.retain(|&waiting| waiting != special);
-                if special == DmSpecial::SaveZero {
-                    s.wraps = 0;
-                    s.home_offset_rad = 0.0;
-                    s.position_rad = None;
-                }
+            s.out = if let Some(special) = special {
                 // No torque is commanded on this tick.
                 s.torque_ff_nm = 0.0;
                 special.bytes()
@@ -993,11 +1006,62 @@ mod tests {
             .unwrap();
         m.send_special(DmSpecial::ClearError);
         m.send_special(DmSpecial::Enable);
-        m.send_special(DmSpecial::ClearError); // again: it moves behind Enable
-        assert_eq!(packed(&m, T0), special(0xFC));
+        m.send_special(DmSpecial::ClearError); // again: it keeps its place
         assert_eq!(packed(&m, T0), special(0xFB));
+        assert_eq!(packed(&m, T0), special(0xFC));
         // Nothing waits any more, and no target is set: zero torque.
         assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+    }
+
+    #[test]
+    fn specials_asked_every_tick_are_all_sent() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(0xA, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let mut sent = Vec::new();
+        for _ in 0..4 {
+            m.send_special(DmSpecial::ClearError);
+            m.send_special(DmSpecial::Enable);
+            sent.push(packed(&m, T0)[7]);
+        }
+        assert_eq!(sent, [0xFB, 0xFC, 0xFB, 0xFC]);
+    }
+
+    #[test]
+    fn specials_wait_while_the_motor_is_offline() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        // One wrap forward, then the motor goes silent.
+        m.update_feedback(&feedback(1, 1, 0xFFF0, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.update_feedback(&feedback(1, 1, 0x0010, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let total = m.total_angle_deg().unwrap();
+        let later = T0 + crate::time::Duration::from_millis(200);
+        m.send_special(DmSpecial::SaveZero);
+        assert_eq!(packed(&m, later), ZERO_TORQUE_BYTES);
+        assert!(!m.is_online());
+        // Back with its old zero (it never got FE): the count goes on where it was.
+        m.update_feedback(&feedback(1, 1, 0x0010, 0x7FF, 0x7FF, 30, 30), later)
+            .unwrap();
+        assert!((m.total_angle_deg().unwrap() - total).abs() < 0.01);
+        // Online again: now FE goes out.
+        assert_eq!(packed(&m, later), special(0xFE));
+    }
+
+    #[test]
+    fn homing_asked_with_save_zero_applies_to_the_new_zero() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0xC000, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.set_total_angle_here_deg(90.0).unwrap();
+        m.send_special(DmSpecial::SaveZero);
+        assert_eq!(packed(&m, T0), special(0xFE));
+        // The first reading after the new zero (about 0 rad) is where 90° is.
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        packed(&m, T0);
+        let total = m.total_angle_deg().unwrap();
+        assert!((total - 90.0).abs() < 0.01, "{total}");
     }
 
     #[test]

@@ -709,6 +709,13 @@ mod tests {
         // 0.08 rpm = 0.56 eRPM: SET_RPM 1.
         braking.set_target_rpm(-0.08).unwrap();
         assert_eq!(packed(&braking), (0x0303, vec![0xFF, 0xFF, 0xFF, 0xFF]));
+        // Exactly half an eRPM (0.25 rpm × 2 pole pairs) rounds away from zero: SET_RPM 1.
+        let mut cfg = VescConfig::new(2);
+        cfg.zero_speed_brake_amps = Some(5.0);
+        let two_poles = VescMotor::new(3, cfg).unwrap();
+        online(&two_poles);
+        two_poles.set_target_rpm(0.25).unwrap();
+        assert_eq!(packed(&two_poles), (0x0303, vec![0, 0, 0, 1]));
     }
 
     #[test]

@@ -157,8 +157,9 @@ impl IncrementalPid {
     /// Replaces the configuration (live tuning); the output is re-limited, the history kept.
     ///
     /// A new TD rate `r` goes on from the tracked value and rate of the old one; a TD switched
-    /// on while running starts at the target, where the error was measured from; a TD
-    /// switched off hands over to the raw target at once (a P step of `kp` times whatever
+    /// on while running starts at the target, where the error was measured from (before any
+    /// step outside the deadband it starts at the measurement, as on a fresh controller); a
+    /// TD switched off hands over to the raw target at once (a P step of `kp` times whatever
     /// the TD still lagged behind it).
     pub fn set_config(&mut self, config: IncrementalPidConfig) -> Result<(), PidConfigError> {
         let fresh = Self::new(config)?;
@@ -310,6 +311,24 @@ mod tests {
     }
 
     #[test]
+    fn a_new_td_rate_mid_step_goes_on_from_the_tracked_value_and_rate() {
+        // From 250 towards 300 with r = 30: after 20 ms the TD has tracked about 12 % of the
+        // way (1 − (1 + rt)·e^(−rt) at rt = 0.6), so e ≈ 6 rpm and rising ≈ 0.5 rpm a tick.
+        let cfg = IncrementalPidConfig::new(18.0, 0.0, 0.0)
+            .with_output_limit(1e6)
+            .with_td(30.0);
+        let mut c = IncrementalPid::new(cfg).unwrap();
+        for _ in 0..20 {
+            c.update(300.0, 250.0, DT);
+        }
+        c.set_config(cfg.with_td(40.0)).unwrap();
+        // Going on: P = 18 · (one tick's progress) ≈ 10. Restarted at the target it would
+        // be 18 · (50 − 6) ≈ 790; at the measurement, 18 · (0 − 6) ≈ −110.
+        let p = c.update(300.0, 250.0, DT).p;
+        assert!(p > 0.0 && p < 30.0, "{p}");
+    }
+
+    #[test]
     fn a_td_switched_on_while_running_starts_at_the_target() {
         let mut c = settled(None);
         let before = c.output();
@@ -353,6 +372,8 @@ mod tests {
         c.update(100.0, 0.0, DT);
         let held = c.output();
         assert_eq!(c.update(100.0, 97.0, DT).output, held);
+        // On the edge, |e| = 5: still inside.
+        assert_eq!(c.update(100.0, 95.0, DT).output, held);
     }
 
     #[test]
