@@ -842,7 +842,8 @@ mod tests {
 
     #[test]
     fn mit_pack_clamps_instead_of_spilling_into_neighbours() {
-        // Torque 1000 N·m would be 0x61F3E without clamping and overwrite kd's low nibble.
+        // Torque 1000 N·m would be (1000 + 10)/20 · 4095 = 206797 = 0x327CD without clamping
+        // and overwrite kd's low nibble.
         let cmd = MitCommand {
             torque_nm: 1000.0,
             kd: 0.0,
@@ -886,11 +887,33 @@ mod tests {
     }
 
     #[test]
+    fn an_mit_command_never_takes_the_shape_of_a_special_command() {
+        // Every field at the top of its range and a torque of 9.99 N·m: code (19.99/20) ·
+        // 4095 = 4092 = 0xFFC, which would make the frame FF×7 FC (Enable). Sent as 0xFFA.
+        let cmd = MitCommand {
+            position_rad: 12.5,
+            velocity_rad_s: 30.0,
+            kp: 500.0,
+            kd: 5.0,
+            torque_nm: 9.99,
+        };
+        assert_eq!(
+            cmd.pack(&MitLimits::DEFAULT),
+            [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFA]
+        );
+        // One field off the top: no guard needed, the torque code goes out as it is.
+        let lower = MitCommand { kd: 4.0, ..cmd };
+        assert_eq!(lower.pack(&MitLimits::DEFAULT)[7], 0xFC);
+    }
+
+    #[test]
     fn fault_codes_decode() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
         for (code, fault) in [
             (8, DmFault::OverVoltage),
+            (9, DmFault::UnderVoltage),
             (0xA, DmFault::OverCurrent),
+            (0xB, DmFault::MosOverTemperature),
             (0xC, DmFault::CoilOverTemperature),
             (0xD, DmFault::CommunicationLost),
             (0xE, DmFault::Overload),

@@ -782,13 +782,18 @@ mod tests {
             d = c.update(0.0, k as f32 * 24.0, 0.01).d;
         }
         assert!((d + 120.0).abs() < 0.5, "{d}");
+        // Live tuning of another gain keeps the filter: D goes on at −120 (restarted from 0
+        // it would be 0.557 · −120 = −67).
+        c.set_config(PidConfig { kp: 0.1, ..cfg }).unwrap();
+        let d = c.update(0.0, 50.0 * 24.0, 0.01).d;
+        assert!((d + 120.0).abs() < 0.5, "{d}");
         // kd cleared while it moves, then the shaft stops, then kd comes back: D is 0.
         c.set_config(PidConfig { kd: 0.0, ..cfg }).unwrap();
         for _ in 0..5 {
-            c.update(0.0, 1200.0, 0.01);
+            c.update(0.0, 1224.0, 0.01);
         }
         c.set_config(cfg).unwrap();
-        assert_eq!(c.update(0.0, 1200.0, 0.01).d, 0.0);
+        assert_eq!(c.update(0.0, 1224.0, 0.01).d, 0.0);
     }
 
     #[test]
