@@ -107,7 +107,8 @@ fn run(data: &[u8]) {
             vesc_id,
             &packets,
             erpm_per_rpm,
-            gear == GearRatio::DIRECT,
+            // Direct drive: the rotor and the output turn together (also written 2:2).
+            gear.rotor_turns() == gear.output_turns(),
         );
     }
 }
