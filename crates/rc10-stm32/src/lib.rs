@@ -11,8 +11,9 @@
 //! ```ignore
 //! // Clocks: 170 MHz from the crystal + PLL, FDCAN kernel clock from PCLK1.
 //! let p = embassy_stm32::init(rc10_stm32::clocks_170mhz(Crystal::Mhz24));
-//! // The control loop's executor: an InterruptExecutor at a high priority (see below).
-//! let control: SendSpawner = start_control_executor();
+//! // The control loop's executor: an InterruptExecutor at a high priority (see below; the
+//! // examples' `control_spawner()` in examples/stm32g474/src/lib.rs starts one).
+//! let control: SendSpawner = control_spawner();
 //! // Motors are statics; register them, freeze the bus, plan the filters from it.
 //! let mut builder = BusBuilder::with_config(BusConfig::DEFAULT.with_tx_depth(rc10_stm32::can::TX_BUFFERS));
 //! builder.register(&WHEEL_1)?;

@@ -3,11 +3,13 @@
 //!
 //! Left stick: forward/back and sideways (asks up to 2 m/s); right stick horizontal: rotation
 //! (up to 4 rad/s). Accelerations are limited (4 m/s², 12 rad/s²), wheel speeds scaled down
-//! together past 400 rpm (with 76 mm wheels about 1.6 m/s straight ahead). If the radio goes silent for 100 ms (or the DR16 reports failsafe)
-//! the sticks read neutral and the chassis brakes to a stop.
+//! together past 400 rpm (about 3.2 m/s straight ahead with 76 mm-radius wheels, so it only
+//! limits combined stick moves). If no valid DBUS frame arrives for 100 ms the sticks read
+//! neutral and the chassis brakes to a stop.
 //!
 //! Wiring: NUCLEO-G474RE; FDCAN1 (PA11 RX / PA12 TX) to a transceiver and the four C620s set
-//! to ids 1 (front left), 2 (front right), 3 (rear right), 4 (rear left); the DR16's DBUS
+//! to ids 1 (front left), 2 (front right), 3 (rear left), 4 (rear right), the order
+//! `LinearChassis::mecanum` gives wheel speeds in; the DR16's DBUS
 //! signal to PC11 (USART3 RX, inverted in the USART, no external inverter), DR16 powered from
 //! 5 V; VOFA+ on the ST-LINK virtual COM port at 921 600 baud (JustFloat: channels t1..t4
 //! target rpm, m1..m4 measured rpm).
@@ -83,9 +85,10 @@ async fn main(spawner: Spawner) {
 /// Remote → twist → wheel speeds, at 500 Hz in thread mode.
 #[embassy_executor::task]
 async fn drive() {
-    // 0.40 m wheelbase, 0.36 m track, 76 mm wheels; wheels 2 and 3 are mounted mirrored.
+    // 0.40 m wheelbase, 0.36 m track, 76 mm wheel radius; the right-side motors (front
+    // right, rear right) are mounted mirrored.
     let chassis = defmt::unwrap!(LinearChassis::mecanum(
-        MecanumConfig::new(0.40, 0.36, 0.076).with_wheel_signs([1.0, -1.0, -1.0, 1.0]),
+        MecanumConfig::new(0.40, 0.36, 0.076).with_wheel_signs([1.0, -1.0, 1.0, -1.0]),
     ));
     let mut limiter = TwistLimiter::new(Twist::new(4.0, 4.0, 12.0)); // m/s², m/s², rad/s²
     let period = Duration::from_millis(2);
