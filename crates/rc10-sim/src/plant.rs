@@ -7,9 +7,12 @@
 //!
 //! Current-controlled ESCs (C620, C610, GM6020 current mode) regulate the commanded current
 //! through a first-order lag, but can only push as much as the supply voltage allows against
-//! back-EMF: the motor's published torque–speed line `T ≤ (n_no_load − n) / gradient` caps the
-//! current in the direction of motion. The GM6020 in voltage mode is a DC-motor model
-//! `L di/dt = V − R i − ke ω` whose `R` is derived from the published speed/torque gradient.
+//! back-EMF: the motor's published torque–speed line `T ≤ (n_0 − n) / gradient` caps the
+//! current in the direction of motion, its end `n_0` placed so that the motor spinning freely
+//! at full command settles at its published no-load speed (friction included). The GM6020 in
+//! voltage mode is a DC-motor model `L di/dt = V − R i − ke ω` whose `R` is derived from the
+//! published speed/torque gradient. Past its over-temperature cut (the GM6020 at 125 °C) an
+//! ESC turns its output off and keeps reporting.
 
 use rc10_core::can::CanFrame;
 use rc10_core::motor::dji::DjiModel;
@@ -26,8 +29,11 @@ pub enum Drive {
         limit_amps: f64,
         /// Time constant of the current loop in seconds.
         tau_s: f64,
-        /// No-load output speed in rpm held by the ESC at the rated supply.
-        no_load_rpm: f64,
+        /// Output speed in rpm at which the motor, at the rated supply, makes no torque: the
+        /// torque–speed line's end, above the published no-load speed by the friction at that
+        /// speed times the gradient (the published figure is measured spinning freely,
+        /// friction included; see [`zero_torque_rpm`]).
+        zero_torque_rpm: f64,
         /// Output speed drop per N·m of load, rpm/(N·m).
         gradient_rpm_per_nm: f64,
     },
@@ -75,11 +81,17 @@ pub struct MotorParams {
     pub ambient_c: f64,
     /// Whether the ESC reports temperature (not the C610).
     pub reports_temperature: bool,
+    /// Winding temperature above which the ESC turns its output off (no current; it still
+    /// reports), °C: the GM6020 at 125 °C (user guide); `None` for none. The C620 does the
+    /// same at 125 °C when its protection is enabled in DJI's assistant: set
+    /// `Some(125.0)` to model that.
+    pub over_temperature_cut_c: Option<f64>,
 }
 
 impl MotorParams {
     /// C620 + M3508 (DJI M3508 P19 / C620 user guides).
     pub fn m3508() -> Self {
+        let (viscous, coulomb) = (2e-3, 0.03);
         Self {
             model: DjiModel::M3508,
             gear_ratio: 3591.0 / 187.0,
@@ -89,14 +101,15 @@ impl MotorParams {
             // Derived from the 49 ms mechanical time constant and 72 rpm/(N·m):
             // J = τ / (72 · 2π/60) = 6.5e-3 kg·m² (low confidence, SPEC.md).
             inertia_kg_m2: 6.5e-3,
-            viscous_nm_s_per_rad: 2e-3,
-            coulomb_nm: 0.03,
+            viscous_nm_s_per_rad: viscous,
+            coulomb_nm: coulomb,
             drive: Drive::CurrentLoop {
                 amps_per_raw: 20.0 / 16384.0,
                 limit_amps: 20.0,
                 // L/R = 0.097 mH / 0.194 Ω = 0.5 ms.
                 tau_s: 0.5e-3,
-                no_load_rpm: 482.0,
+                // 482 rpm no-load with the C620, spinning freely: the line ends at 491.4.
+                zero_torque_rpm: zero_torque_rpm(482.0, 72.0, coulomb, viscous),
                 gradient_rpm_per_nm: 72.0,
             },
             feedback_amps_per_raw: 20.0 / 16384.0,
@@ -107,24 +120,27 @@ impl MotorParams {
             thermal_capacity_j_per_k: 176.0,
             ambient_c: 25.0,
             reports_temperature: true,
+            over_temperature_cut_c: None,
         }
     }
 
     /// C610 + M2006 (DJI M2006 P36 / C610 user guides).
     pub fn m2006() -> Self {
+        let (viscous, coulomb) = (1e-3, 0.02);
         Self {
             model: DjiModel::M2006,
             gear_ratio: 36.0,
             torque_constant_nm_per_a: 0.18,
             // Derived: 52.78 ms / (110 rpm/(N·m) · 2π/60) = 4.6e-3 kg·m².
             inertia_kg_m2: 4.6e-3,
-            viscous_nm_s_per_rad: 1e-3,
-            coulomb_nm: 0.02,
+            viscous_nm_s_per_rad: viscous,
+            coulomb_nm: coulomb,
             drive: Drive::CurrentLoop {
                 amps_per_raw: 10.0 / 10000.0,
                 limit_amps: 10.0,
                 tau_s: 0.5e-3,
-                no_load_rpm: 500.0,
+                // 500 rpm no-load with the C610: the line ends at 508.0.
+                zero_torque_rpm: zero_torque_rpm(500.0, 110.0, coulomb, viscous),
                 gradient_rpm_per_nm: 110.0,
             },
             feedback_amps_per_raw: 10.0 / 10000.0,
@@ -133,6 +149,7 @@ impl MotorParams {
             thermal_capacity_j_per_k: 60.0,
             ambient_c: 25.0,
             reports_temperature: false,
+            over_temperature_cut_c: None,
         }
     }
 
@@ -163,6 +180,7 @@ impl MotorParams {
             thermal_capacity_j_per_k: 100.0,
             ambient_c: 25.0,
             reports_temperature: true,
+            over_temperature_cut_c: Some(125.0),
         }
     }
 
@@ -179,13 +197,33 @@ impl MotorParams {
                     amps_per_raw: 3.0 / 16384.0,
                     limit_amps: 3.0,
                     tau_s: 0.67e-3,
-                    no_load_rpm: 320.0,
+                    // 320 rpm no-load: the line ends at 322.1.
+                    zero_torque_rpm: zero_torque_rpm(
+                        320.0,
+                        156.0,
+                        p.coulomb_nm,
+                        p.viscous_nm_s_per_rad,
+                    ),
                     gradient_rpm_per_nm: 156.0,
                 };
                 p
             }
         }
     }
+}
+
+/// The torque–speed line's zero-torque end (rpm) for a motor whose published no-load speed
+/// `no_load_rpm` was measured spinning freely: above it by the friction at that speed (N·m)
+/// times the line's `gradient_rpm_per_nm`, so that the plant at full command and no load
+/// settles at `no_load_rpm`, as the real motor does.
+pub fn zero_torque_rpm(
+    no_load_rpm: f64,
+    gradient_rpm_per_nm: f64,
+    coulomb_nm: f64,
+    viscous_nm_s_per_rad: f64,
+) -> f64 {
+    let friction_nm = coulomb_nm + viscous_nm_s_per_rad * no_load_rpm * TAU / 60.0;
+    no_load_rpm + gradient_rpm_per_nm * friction_nm
 }
 
 /// What the motor drives besides itself.
@@ -294,7 +332,7 @@ impl DjiEsc {
     }
 
     /// Whether the current `i` lies strictly inside the torque–speed line's bounds in its own
-    /// direction (`|i| < (no_load_rpm ∓ n) / gradient / kt`) and within `limit_amps`, so that
+    /// direction (`|i| < (zero_torque_rpm ∓ n) / gradient / kt`) and within `limit_amps`, so that
     /// the clamp in [`step`](Self::step) would return `i` itself. Decided with one
     /// multiplication instead of the bounds' five divisions; when it is not clearly inside,
     /// `false`, and the exact bounds decide.
@@ -302,22 +340,22 @@ impl DjiEsc {
     /// Why it never says `true` wrongly: the speed here (`ω · 60/2π`) differs from the exact
     /// one (`ω · 60 / 2π`) by a few ulps, the exact bound divides by the gradient and then by
     /// kt (two roundings), and `|i| · rpm_per_amp` rounds once: together a few parts in 1e16
-    /// of `no_load_rpm + |n|`, far inside the margin of 1e-12 of it plus 1e-9 relative. That
+    /// of `zero_torque_rpm + |n|`, far inside the margin of 1e-12 of it plus 1e-9 relative. That
     /// holds while no intermediate is subnormal: the constants are within [1e-100, 1e100]
     /// (else no shortcut) and headroom below 1e-100 rpm is left to the exact path, so the
     /// exact path's quotients stay above 1e-300. NaN compares false.
-    fn inside_torque_speed_line(&self, i: f64, no_load_rpm: f64, limit_amps: f64) -> bool {
+    fn inside_torque_speed_line(&self, i: f64, zero_torque_rpm: f64, limit_amps: f64) -> bool {
         const RPM_PER_RAD_S: f64 = 60.0 / TAU;
         let Some(rpm_per_amp) = self.rpm_per_amp else {
             return false;
         };
         let n = self.omega * RPM_PER_RAD_S;
         let toward = if i >= 0.0 {
-            no_load_rpm - n
+            zero_torque_rpm - n
         } else {
-            no_load_rpm + n
+            zero_torque_rpm + n
         };
-        let margin = (no_load_rpm.abs() + n.abs()) * 1e-12;
+        let margin = (zero_torque_rpm.abs() + n.abs()) * 1e-12;
         let headroom_rpm = (toward - margin) * (1.0 - 1e-9);
         i.abs() <= limit_amps && headroom_rpm > 1e-100 && i.abs() * rpm_per_amp < headroom_rpm
     }
@@ -351,6 +389,13 @@ impl DjiEsc {
     /// The parameters.
     pub fn params(&self) -> &MotorParams {
         &self.params
+    }
+
+    /// Whether the winding is past the ESC's over-temperature cut (output off).
+    pub fn over_temperature(&self) -> bool {
+        self.params
+            .over_temperature_cut_c
+            .is_some_and(|cut| self.temperature > cut)
     }
 
     /// Output speed in rpm (the physical truth, not the reported value).
@@ -443,13 +488,13 @@ impl DjiEsc {
             Drive::CurrentLoop {
                 amps_per_raw,
                 limit_amps,
-                no_load_rpm,
+                zero_torque_rpm,
                 gradient_rpm_per_nm,
                 ..
             } => {
                 let target = (command * amps_per_raw).clamp(-limit_amps, limit_amps);
                 let i = self.current + (target - self.current) * f.lag;
-                if self.inside_torque_speed_line(i, no_load_rpm, limit_amps) {
+                if self.inside_torque_speed_line(i, zero_torque_rpm, limit_amps) {
                     // The clamp below would return `i` itself: skip its divisions.
                     i
                 } else {
@@ -457,7 +502,7 @@ impl DjiEsc {
                     // the torque–speed line.
                     let n = self.speed_rpm();
                     let headroom_nm =
-                        |dir: f64| (no_load_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
+                        |dir: f64| (zero_torque_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
                     let max_pos = headroom_nm(1.0) / p.torque_constant_nm_per_a;
                     let max_neg = headroom_nm(-1.0) / p.torque_constant_nm_per_a;
                     i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
@@ -475,7 +520,7 @@ impl DjiEsc {
                 self.current + (i_ss - self.current) * f.lag
             }
         };
-        if !self.powered {
+        if !self.powered || self.over_temperature() {
             self.current = 0.0;
         }
         let drive = p.torque_constant_nm_per_a * self.current - load_torque;
@@ -594,11 +639,48 @@ mod tests {
     }
 
     #[test]
-    fn m3508_full_current_reaches_no_load_speed_minus_friction() {
-        let esc = run_full_current(MotorParams::m3508(), 1.0);
-        // Friction at ~480 rpm: 0.03 + 2e-3 · 50 = 0.13 N·m → 9 rpm below 482.
-        let n = esc.speed_rpm();
-        assert!(n > 465.0 && n < 482.0, "n = {n}");
+    fn a_gm6020_past_125_c_turns_its_output_off_and_still_reports() {
+        let mut esc = DjiEsc::new(MotorParams::gm6020_voltage(), 1, Load::default(), 0);
+        esc.command_raw = 25000.0;
+        for k in 0..2000 {
+            esc.step(k * 100, 1e-4);
+        }
+        let spinning = esc.speed_rpm();
+        assert!(spinning > 200.0, "{spinning}");
+        esc.set_temperature_c(126.0);
+        for k in 2000..2010 {
+            esc.step(k * 100, 1e-4);
+            assert_eq!(esc.current_amps(), 0.0);
+        }
+        // Coasting down against friction only (no drive): slower, and still reporting 126 °C.
+        assert!(esc.speed_rpm() < spinning);
+        let frame = esc.feedback_frame().unwrap();
+        assert_eq!(frame.data()[6], 126);
+        // An M3508 (C620 protection off by default) keeps driving at 126 °C.
+        let mut m3508 = DjiEsc::new(MotorParams::m3508(), 1, Load::default(), 0);
+        m3508.command_raw = 16384.0;
+        m3508.set_temperature_c(126.0);
+        m3508.step(0, 1e-4);
+        assert!(m3508.current_amps() > 0.0);
+    }
+
+    #[test]
+    fn full_current_unloaded_reaches_the_published_no_load_speed() {
+        // M3508 with the C620 482 rpm, M2006 with the C610 500 rpm, GM6020 320 rpm (SPEC),
+        // each measured spinning freely: friction included. 1 s is 20 mechanical time
+        // constants of the slowest.
+        for (params, no_load) in [
+            (MotorParams::m3508(), 482.0),
+            (MotorParams::m2006(), 500.0),
+            (MotorParams::for_model(DjiModel::Gm6020Current), 320.0),
+        ] {
+            let esc = run_full_current(params, 1.0);
+            let n = esc.speed_rpm();
+            assert!((n - no_load).abs() < 0.5, "{:?}: n = {n}", params.model);
+        }
+        // The M3508's line: friction at 482 rpm is 0.03 + 2e-3 · 50.47 = 0.131 N·m, so it
+        // ends 0.131 · 72 = 9.4 rpm higher.
+        assert!((zero_torque_rpm(482.0, 72.0, 0.03, 2e-3) - 491.43).abs() < 0.01);
     }
 
     #[test]
@@ -680,7 +762,7 @@ mod tests {
     fn exact_torque_speed_clamp(esc: &DjiEsc, i: f64) -> f64 {
         let Drive::CurrentLoop {
             limit_amps,
-            no_load_rpm,
+            zero_torque_rpm,
             gradient_rpm_per_nm,
             ..
         } = esc.params.drive
@@ -688,7 +770,7 @@ mod tests {
             unreachable!("current-loop models only")
         };
         let n = esc.speed_rpm();
-        let headroom_nm = |dir: f64| (no_load_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
+        let headroom_nm = |dir: f64| (zero_torque_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
         let max_pos = headroom_nm(1.0) / esc.params.torque_constant_nm_per_a;
         let max_neg = headroom_nm(-1.0) / esc.params.torque_constant_nm_per_a;
         i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
@@ -706,7 +788,7 @@ mod tests {
         ] {
             let Drive::CurrentLoop {
                 limit_amps,
-                no_load_rpm,
+                zero_torque_rpm,
                 gradient_rpm_per_nm,
                 ..
             } = params.drive
@@ -718,13 +800,13 @@ mod tests {
                 // Speeds across ±1.5 × no-load (and exactly at it), currents across the limit
                 // and right at both bounds, where the shortcut must step aside.
                 let rpm = match k % 5 {
-                    0 => no_load_rpm,
-                    1 => -no_load_rpm,
-                    _ => (unit() - 0.5) * 3.0 * no_load_rpm,
+                    0 => zero_torque_rpm,
+                    1 => -zero_torque_rpm,
+                    _ => (unit() - 0.5) * 3.0 * zero_torque_rpm,
                 };
                 esc.omega = rpm * TAU / 60.0;
                 let n = esc.speed_rpm();
-                let bound = (no_load_rpm - n.abs()).max(0.0)
+                let bound = (zero_torque_rpm - n.abs()).max(0.0)
                     / gradient_rpm_per_nm
                     / params.torque_constant_nm_per_a;
                 let sign = if unit() < 0.5 { 1.0 } else { -1.0 };
@@ -739,7 +821,7 @@ mod tests {
                 };
                 for i in [i, -i, 0.0, -0.0, f64::NAN, limit_amps, -limit_amps] {
                     checked += 1;
-                    if esc.inside_torque_speed_line(i, no_load_rpm, limit_amps) {
+                    if esc.inside_torque_speed_line(i, zero_torque_rpm, limit_amps) {
                         taken += 1;
                         let exact = exact_torque_speed_clamp(&esc, i);
                         assert_eq!(exact.to_bits(), i.to_bits(), "rpm {rpm} i {i:e}");
