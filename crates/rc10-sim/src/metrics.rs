@@ -14,8 +14,9 @@ pub struct StepMetrics {
     pub rise_time_s: Option<f64>,
     /// Largest excursion beyond the target, percent of the step size.
     pub overshoot_percent: f64,
-    /// Time after the step until the response stays within ±2 % of the step size, seconds
-    /// (`None` if it is outside the band at the end).
+    /// Time after the step until the response stays within ±2 % of the step size, seconds:
+    /// the first sample after the last one outside the band (`None` if it is outside the
+    /// band at the end).
     pub settling_time_s: Option<f64>,
     /// Mean absolute error over the last 10 % of the window, in the signal's unit.
     pub steady_state_error: f64,
@@ -71,15 +72,14 @@ pub(crate) fn step_metrics_of(
         .map(|(_, v, _)| (progress(*v) - 1.0) * 100.0)
         .fold(0.0f64, f64::max);
     let band = 0.02 * size;
+    // Settled from the first sample after the last one outside the band (the response is
+    // known to be inside from then on; between the two samples it is not known).
     let last_outside = samples
         .iter()
-        .rev()
-        .find(|(_, v, _)| (v - target).abs() > band)
-        .map(|(t, _, _)| *t);
-    let settling_time_s = match (last_outside, samples.last()) {
-        (None, _) => Some(0.0),
-        (Some(t), Some((t_end, _, _))) if t < *t_end => Some(t - t0_s),
-        _ => None,
+        .rposition(|(_, v, _)| (v - target).abs() > band);
+    let settling_time_s = match last_outside {
+        None => Some(0.0),
+        Some(i) => samples.get(i.saturating_add(1)).map(|(t, _, _)| t - t0_s),
     };
     let tail_from = samples.len() - samples.len() / 10;
     let tail = samples.get(tail_from..).unwrap_or(&[]);
@@ -164,6 +164,21 @@ mod tests {
     }
 
     #[test]
+    fn settling_is_the_first_sample_after_the_last_one_outside_the_band() {
+        // 1 ms samples; the 2 % band is ±0.02. Last outside at 80 ms (0.97), inside from
+        // 81 ms on: it entered the band somewhere in (80, 81] ms, so 81 ms.
+        let t: Vec<f64> = (0..200).map(|k| k as f64 * 1e-3).collect();
+        let y: Vec<f64> = (0..200)
+            .map(|k| if k <= 80 { 0.97 * k as f64 / 80.0 } else { 1.0 })
+            .collect();
+        let m = step_metrics(&t, &y, &vec![0.0; 200], 0.0, 0.0, 1.0);
+        assert!((m.settling_time_s.unwrap() - 0.081).abs() < 1e-12, "{m:?}");
+        // Inside from the first sample: settled at once.
+        let m = step_metrics(&t, &vec![1.0; 200], &vec![0.0; 200], 0.0, 0.0, 1.0);
+        assert_eq!(m.settling_time_s, Some(0.0));
+    }
+
+    #[test]
     fn never_reaching_target_reports_none() {
         let t = [0.0, 0.1, 0.2];
         let y = [0.0, 0.2, 0.3];
@@ -174,8 +189,9 @@ mod tests {
 
     #[test]
     fn m3508_bang_bang_rise_time_matches_hand_estimate() {
-        // 0 → 300 rpm: current-limited at 5 N·m up to ≈122 rpm, then the torque–speed line
-        // (τ = 49 ms) takes over; 10 % ≈ 4 ms, 90 % ≈ 43 ms → ≈ 39 ms.
+        // 0 → 300 rpm: current-limited at 5 N·m up to 491.4 − 5 · 72 ≈ 131 rpm (the line's
+        // end, see `zero_torque_rpm`), then the torque–speed line (τ = 49 ms) takes over;
+        // 10 % ≈ 4 ms, 90 % ≈ 42 ms → ≈ 38 ms.
         let t = min_speed_rise_time_s(MotorParams::m3508(), Load::default(), 300.0).unwrap();
         assert!(t > 0.033 && t < 0.045, "t = {t}");
     }
