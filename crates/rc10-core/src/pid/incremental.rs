@@ -374,6 +374,10 @@ mod tests {
         assert_eq!(c.update(100.0, 97.0, DT).output, held);
         // On the edge, |e| = 5: still inside.
         assert_eq!(c.update(100.0, 95.0, DT).output, held);
+        // No deadband: an error of exactly 0 is a step, P = 18 · (0 − 7) = −126.
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(18.0, 0.0, 0.0)).unwrap();
+        c.update(7.0, 0.0, DT);
+        assert_eq!(c.update(7.0, 7.0, DT).output, -126.0);
     }
 
     #[test]

@@ -256,7 +256,7 @@ proptest! {
 
     /// The incremental controller: finite and within its limit for any input, with the
     /// documented NaN rule (zero, state untouched), invalid-dt rule (output held) and deadband
-    /// (no TD: an error within the band holds the output).
+    /// (no TD: an error within a band wider than 0 holds the output).
     #[test]
     fn incremental_pid_is_finite_limited_and_keeps_its_rules(
         cfg in incremental_config(),
@@ -277,7 +277,8 @@ proptest! {
             if !dt_valid(dt) {
                 prop_assert_eq!(t.output, before.output(), "invalid dt must hold the output");
             }
-            if cfg.td_r_rad_s.is_none() && (target - meas).abs() <= cfg.deadband {
+            // A deadband of 0 is no band: an error of exactly 0 is a step like any other.
+            if cfg.td_r_rad_s.is_none() && cfg.deadband > 0.0 && (target - meas).abs() <= cfg.deadband {
                 prop_assert_eq!(t.output, before.output(), "error within the deadband must hold the output");
             }
         }
