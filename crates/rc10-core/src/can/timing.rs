@@ -247,40 +247,28 @@ const fn stuff_byte(state: u8, byte: u8) -> (u8, u8) {
     (s, stuffed)
 }
 
-/// For each byte and state: the state after the byte. Indexed `[byte][state]` so that the
-/// chain from one byte to the next is a single load (the row address does not depend on
-/// the state).
+/// For each byte and state: the state after the byte, and the stuff bits inserted while
+/// sending it (0–2). Indexed `[byte][state]` so that the chain from one byte to the next is a
+/// single load (the row address does not depend on the state).
 // Built at compile time: an out-of-bounds index would fail the build, not panic at run time.
 #[allow(clippy::indexing_slicing)]
-const STUFF_NEXT: [[u8; 16]; 256] = {
-    let mut table = [[0u8; 16]; 256];
+const STUFF_TABLES: ([[u8; 16]; 256], [[u8; 16]; 256]) = {
+    let (mut next, mut count) = ([[0u8; 16]; 256], [[0u8; 16]; 256]);
     let mut byte = 0;
     while byte < 256 {
         let mut state = 0;
         while state < 16 {
-            table[byte][state] = stuff_byte(state as u8, byte as u8).0;
+            (next[byte][state], count[byte][state]) = stuff_byte(state as u8, byte as u8);
             state += 1;
         }
         byte += 1;
     }
-    table
+    (next, count)
 };
-
-/// For each byte and state: the stuff bits inserted while sending the byte (0–2).
-#[allow(clippy::indexing_slicing)]
-const STUFF_COUNT: [[u8; 16]; 256] = {
-    let mut table = [[0u8; 16]; 256];
-    let mut byte = 0;
-    while byte < 256 {
-        let mut state = 0;
-        while state < 16 {
-            table[byte][state] = stuff_byte(state as u8, byte as u8).1;
-            state += 1;
-        }
-        byte += 1;
-    }
-    table
-};
+/// The state after each byte from each state (see [`STUFF_TABLES`]).
+const STUFF_NEXT: [[u8; 16]; 256] = STUFF_TABLES.0;
+/// The stuff bits each byte gets from each state (see [`STUFF_TABLES`]).
+const STUFF_COUNT: [[u8; 16]; 256] = STUFF_TABLES.1;
 
 #[cfg(test)]
 mod tests {
