@@ -53,56 +53,132 @@ pub(crate) fn step_metrics_of(
     y0: f64,
     target: f64,
 ) -> StepMetrics {
-    let delta = target - y0;
-    let size = delta.abs().max(f64::EPSILON);
-    let dir = delta.signum();
-    let progress = |v: f64| (v - y0) * dir / size;
-    let first_reaching = |fraction: f64| {
-        samples
-            .iter()
-            .find(|(_, v, _)| progress(*v) >= fraction)
-            .map(|(t, _, _)| *t)
-    };
-    let rise_time_s = match (first_reaching(0.1), first_reaching(0.9)) {
-        (Some(a), Some(b)) => Some(b - a),
-        _ => None,
-    };
-    let overshoot_percent = samples
-        .iter()
-        .map(|(_, v, _)| (progress(*v) - 1.0) * 100.0)
-        .fold(0.0f64, f64::max);
-    let band = 0.02 * size;
-    // Settled from the first sample after the last one outside the band (the response is
-    // known to be inside from then on; between the two samples it is not known).
-    let last_outside = samples
-        .iter()
-        .rposition(|(_, v, _)| (v - target).abs() > band);
-    let settling_time_s = match last_outside {
-        None => Some(0.0),
-        Some(i) => samples.get(i.saturating_add(1)).map(|(t, _, _)| t - t0_s),
-    };
-    let tail_from = samples.len() - samples.len() / 10;
-    let tail = samples.get(tail_from..).unwrap_or(&[]);
-    let steady_state_error = if tail.is_empty() {
-        f64::NAN
-    } else {
-        tail.iter().map(|(_, v, _)| (v - target).abs()).sum::<f64>() / tail.len() as f64
-    };
-    let iae = samples
-        .iter()
-        .zip(samples.iter().skip(1))
-        .map(|((t0, v0, _), (t1, _, _))| (t1 - t0) * (v0 - target).abs())
-        .sum();
-    let peak_current_amps = samples.iter().map(|(_, _, i)| i.abs()).fold(0.0, f64::max);
-    StepMetrics {
-        initial: y0,
-        target,
-        rise_time_s,
-        overshoot_percent,
-        settling_time_s,
-        steady_state_error,
-        iae,
-        peak_current_amps,
+    let mut acc = StepAccumulator::new(samples.len(), t0_s, y0, target);
+    for &(t_s, value, current_amps) in samples {
+        acc.push(t_s, value, current_amps);
+    }
+    acc.finish()
+}
+
+/// [`StepMetrics`] built one sample at a time, without keeping the samples: for a response
+/// of `len` samples (all at or after the step), known in advance because the steady-state
+/// error averages the last tenth of them. Every figure is folded in sample order, so the
+/// result is the same, to the bit, as computing it over the collected series.
+#[derive(Debug, Clone)]
+pub(crate) struct StepAccumulator {
+    t0_s: f64,
+    y0: f64,
+    target: f64,
+    /// Sign of the step (+1, −1; 0 for none).
+    dir: f64,
+    /// Size of the step (at least `f64::EPSILON`).
+    size: f64,
+    /// Half-width of the settling band.
+    band: f64,
+    /// Samples pushed so far.
+    count: usize,
+    /// Index of the first sample of the steady-state tail.
+    tail_from: usize,
+    /// First times at 10 % and 90 % of the step.
+    t10: Option<f64>,
+    t90: Option<f64>,
+    overshoot_percent: f64,
+    /// Whether some sample (the last one: `last_outside`) was outside the band, and the
+    /// settling time the first sample after the last one outside gave.
+    any_outside: bool,
+    last_outside: bool,
+    settling_time_s: Option<f64>,
+    tail_sum: f64,
+    /// The previous sample's time and value (IAE integrates each over the next interval).
+    previous: Option<(f64, f64)>,
+    iae: f64,
+    peak_current_amps: f64,
+}
+
+impl StepAccumulator {
+    /// For `len` samples after a step at `t0_s` from `y0` towards `target`.
+    pub(crate) fn new(len: usize, t0_s: f64, y0: f64, target: f64) -> Self {
+        let delta = target - y0;
+        let size = delta.abs().max(f64::EPSILON);
+        Self {
+            t0_s,
+            y0,
+            target,
+            dir: delta.signum(),
+            size,
+            band: 0.02 * size,
+            count: 0,
+            tail_from: len - len / 10,
+            t10: None,
+            t90: None,
+            overshoot_percent: 0.0,
+            any_outside: false,
+            last_outside: false,
+            settling_time_s: None,
+            // `Sum` for floats starts at −0.0.
+            tail_sum: -0.0,
+            previous: None,
+            iae: -0.0,
+            peak_current_amps: 0.0,
+        }
+    }
+
+    /// The next sample: time in s, value, motor current in A.
+    pub(crate) fn push(&mut self, t_s: f64, value: f64, current_amps: f64) {
+        let progress = (value - self.y0) * self.dir / self.size;
+        if self.t10.is_none() && progress >= 0.1 {
+            self.t10 = Some(t_s);
+        }
+        if self.t90.is_none() && progress >= 0.9 {
+            self.t90 = Some(t_s);
+        }
+        self.overshoot_percent = self.overshoot_percent.max((progress - 1.0) * 100.0);
+        // Settled from the first sample after the last one outside the band (the response is
+        // known to be inside from then on; between the two samples it is not known).
+        let error = (value - self.target).abs();
+        let outside = error > self.band;
+        if outside {
+            self.any_outside = true;
+            self.settling_time_s = None;
+        } else if self.last_outside {
+            self.settling_time_s = Some(t_s - self.t0_s);
+        }
+        self.last_outside = outside;
+        if self.count >= self.tail_from {
+            self.tail_sum += error;
+        }
+        if let Some((t_prev, v_prev)) = self.previous {
+            self.iae += (t_s - t_prev) * (v_prev - self.target).abs();
+        }
+        self.previous = Some((t_s, value));
+        self.peak_current_amps = self.peak_current_amps.max(current_amps.abs());
+        self.count += 1;
+    }
+
+    /// The figures of the samples pushed (which must be the `len` announced).
+    pub(crate) fn finish(&self) -> StepMetrics {
+        let tail_len = self.count.saturating_sub(self.tail_from);
+        StepMetrics {
+            initial: self.y0,
+            target: self.target,
+            rise_time_s: match (self.t10, self.t90) {
+                (Some(a), Some(b)) => Some(b - a),
+                _ => None,
+            },
+            overshoot_percent: self.overshoot_percent,
+            settling_time_s: if self.any_outside {
+                self.settling_time_s
+            } else {
+                Some(0.0)
+            },
+            steady_state_error: if tail_len == 0 {
+                f64::NAN
+            } else {
+                self.tail_sum / tail_len as f64
+            },
+            iae: self.iae,
+            peak_current_amps: self.peak_current_amps,
+        }
     }
 }
 
@@ -176,6 +252,21 @@ mod tests {
         // Inside from the first sample: settled at once.
         let m = step_metrics(&t, &vec![1.0; 200], &vec![0.0; 200], 0.0, 0.0, 1.0);
         assert_eq!(m.settling_time_s, Some(0.0));
+    }
+
+    #[test]
+    fn steady_state_error_averages_the_last_tenth_of_the_samples() {
+        // 20 samples: the last tenth is the last two, 0.5 and 0.3 off the target of 1: 0.4.
+        // The 0.9 off just before them is not in it.
+        let t: Vec<f64> = (0..20).map(|k| k as f64 * 1e-3).collect();
+        let mut y = vec![1.0; 20];
+        (y[17], y[18], y[19]) = (0.1, 1.5, 0.7);
+        let m = step_metrics(&t, &y, &[0.0; 20], 0.0, 0.0, 1.0);
+        assert!((m.steady_state_error - 0.4).abs() < 1e-12, "{m:?}");
+        // Outside the band at the last sample: not settled.
+        assert_eq!(m.settling_time_s, None);
+        // 50 % overshoot at 18 ms.
+        assert!((m.overshoot_percent - 50.0).abs() < 1e-9, "{m:?}");
     }
 
     #[test]

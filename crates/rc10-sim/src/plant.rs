@@ -363,27 +363,25 @@ impl DjiEsc {
     /// The factors of a step of `dt_s`, worked out when the step length changes: the step
     /// then multiplies where the equations divide (a division's latency sits on the chain
     /// from current to speed to angle).
-    fn step_factors(&mut self, dt_s: f64) -> StepFactors {
-        if self.factors.dt_s != dt_s {
-            let p = &self.params;
-            let tau_s = match p.drive {
-                Drive::CurrentLoop { tau_s, .. } => tau_s,
-                Drive::Voltage {
-                    resistance_ohm,
-                    inductance_h,
-                    ..
-                } => inductance_h / resistance_ohm,
-            };
-            self.factors = StepFactors {
-                dt_s,
-                lag: 1.0 - (-dt_s / tau_s).exp(),
-                dt_per_inertia: dt_s / (p.inertia_kg_m2 + self.load.inertia_kg_m2),
-                rotor_turn_per_omega: p.gear_ratio * dt_s,
-                cooling_w_per_k: 1.0 / p.thermal_resistance_k_per_w,
-                dt_per_heat_capacity: dt_s / p.thermal_capacity_j_per_k,
-            };
+    #[cold]
+    fn step_factors(&self, dt_s: f64) -> StepFactors {
+        let p = &self.params;
+        let tau_s = match p.drive {
+            Drive::CurrentLoop { tau_s, .. } => tau_s,
+            Drive::Voltage {
+                resistance_ohm,
+                inductance_h,
+                ..
+            } => inductance_h / resistance_ohm,
+        };
+        StepFactors {
+            dt_s,
+            lag: 1.0 - (-dt_s / tau_s).exp(),
+            dt_per_inertia: dt_s / (p.inertia_kg_m2 + self.load.inertia_kg_m2),
+            rotor_turn_per_omega: p.gear_ratio * dt_s,
+            cooling_w_per_k: 1.0 / p.thermal_resistance_k_per_w,
+            dt_per_heat_capacity: dt_s / p.thermal_capacity_j_per_k,
         }
-        self.factors
     }
 
     /// The parameters.
@@ -477,76 +475,84 @@ impl DjiEsc {
 
     /// Integrates `dt_s` seconds at time `now_us`.
     pub fn step(&mut self, now_us: u64, dt_s: f64) {
-        let f = self.step_factors(dt_s);
-        let p = self.params;
+        if self.factors.dt_s != dt_s {
+            self.factors = self.step_factors(dt_s);
+        }
+        // Borrowed, not copied: a step is short and runs 5000 times a simulated second.
+        let (p, f) = (&self.params, &self.factors);
         let load_torque = match self.load.step {
             Some((t, torque)) if now_us >= t => torque,
             _ => self.load.torque_nm,
         };
-        let command = if self.powered { self.command_raw } else { 0.0 };
-        self.current = match p.drive {
-            Drive::CurrentLoop {
-                amps_per_raw,
-                limit_amps,
-                zero_torque_rpm,
-                gradient_rpm_per_nm,
-                ..
-            } => {
-                let target = (command * amps_per_raw).clamp(-limit_amps, limit_amps);
-                let i = self.current + (target - self.current) * f.lag;
-                if self.inside_torque_speed_line(i, zero_torque_rpm, limit_amps) {
-                    // The clamp below would return `i` itself: skip its divisions.
-                    i
-                } else {
-                    // Voltage headroom: in the direction of motion the torque cannot exceed
-                    // the torque–speed line.
-                    let n = self.speed_rpm();
-                    let headroom_nm =
-                        |dir: f64| (zero_torque_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
-                    let max_pos = headroom_nm(1.0) / p.torque_constant_nm_per_a;
-                    let max_neg = headroom_nm(-1.0) / p.torque_constant_nm_per_a;
-                    i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
+        let off = !self.powered
+            || p.over_temperature_cut_c
+                .is_some_and(|cut| self.temperature > cut);
+        let current = if off {
+            0.0
+        } else {
+            match p.drive {
+                Drive::CurrentLoop {
+                    amps_per_raw,
+                    limit_amps,
+                    zero_torque_rpm,
+                    gradient_rpm_per_nm,
+                    ..
+                } => {
+                    let target = (self.command_raw * amps_per_raw).clamp(-limit_amps, limit_amps);
+                    let i = self.current + (target - self.current) * f.lag;
+                    if self.inside_torque_speed_line(i, zero_torque_rpm, limit_amps) {
+                        // The clamp below would return `i` itself: skip its divisions.
+                        i
+                    } else {
+                        // Voltage headroom: in the direction of motion the torque cannot
+                        // exceed the torque–speed line.
+                        let n = self.speed_rpm();
+                        let headroom_nm =
+                            |dir: f64| (zero_torque_rpm - dir * n).max(0.0) / gradient_rpm_per_nm;
+                        let max_pos = headroom_nm(1.0) / p.torque_constant_nm_per_a;
+                        let max_neg = headroom_nm(-1.0) / p.torque_constant_nm_per_a;
+                        i.clamp(-max_neg.min(limit_amps), max_pos.min(limit_amps))
+                    }
+                }
+                Drive::Voltage {
+                    volts_per_raw,
+                    raw_limit,
+                    resistance_ohm,
+                    ke_v_s_per_rad,
+                    ..
+                } => {
+                    let v = self.command_raw.clamp(-raw_limit, raw_limit) * volts_per_raw;
+                    let i_ss = (v - ke_v_s_per_rad * self.omega) / resistance_ohm;
+                    self.current + (i_ss - self.current) * f.lag
                 }
             }
-            Drive::Voltage {
-                volts_per_raw,
-                raw_limit,
-                resistance_ohm,
-                ke_v_s_per_rad,
-                ..
-            } => {
-                let v = command.clamp(-raw_limit, raw_limit) * volts_per_raw;
-                let i_ss = (v - ke_v_s_per_rad * self.omega) / resistance_ohm;
-                self.current + (i_ss - self.current) * f.lag
-            }
         };
-        if !self.powered || self.over_temperature() {
-            self.current = 0.0;
-        }
-        let drive = p.torque_constant_nm_per_a * self.current - load_torque;
+        self.current = current;
+        let drive = p.torque_constant_nm_per_a * current - load_torque;
         if self.locked {
             self.omega = 0.0;
         } else {
-            let viscous = p.viscous_nm_s_per_rad * self.omega;
-            let moving = self.omega.abs() > 1e-6;
+            let omega = self.omega;
+            let viscous = p.viscous_nm_s_per_rad * omega;
+            let moving = omega.abs() > 1e-6;
             let coulomb = if moving {
-                p.coulomb_nm * self.omega.signum()
+                p.coulomb_nm * omega.signum()
             } else {
                 // Static friction holds the shaft until the drive exceeds it.
                 drive.clamp(-p.coulomb_nm, p.coulomb_nm)
             };
-            let next = self.omega + (drive - viscous - coulomb) * f.dt_per_inertia;
+            let next = omega + (drive - viscous - coulomb) * f.dt_per_inertia;
             // Friction stops the shaft; it does not reverse it.
-            self.omega =
-                if moving && next.signum() != self.omega.signum() && drive.abs() <= p.coulomb_nm {
-                    0.0
-                } else {
-                    next
-                };
+            self.omega = if moving && next.signum() != omega.signum() && drive.abs() <= p.coulomb_nm
+            {
+                0.0
+            } else {
+                next
+            };
         }
         self.rotor_angle += self.omega * f.rotor_turn_per_omega;
         // Copper losses heat the winding; it cools towards ambient.
-        let loss_w = 1.5 * self.current * self.current * p.phase_resistance_ohm;
+        let loss_w = 1.5 * current * current * p.phase_resistance_ohm;
         let cooling_w = (self.temperature - p.ambient_c) * f.cooling_w_per_k;
         self.temperature += (loss_w - cooling_w) * f.dt_per_heat_capacity;
     }

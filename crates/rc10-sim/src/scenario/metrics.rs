@@ -1,7 +1,7 @@
 //! Step-response figures of a run's target profiles, measured on the physical signal.
 
 use super::{MotorSample, Sample, TargetKind, TargetSpec};
-use crate::metrics::{StepMetrics, step_metrics_of};
+use crate::metrics::{StepAccumulator, StepMetrics, step_metrics_of};
 use rc10_core::math::wrap_deg_180;
 
 /// Step metrics of one target profile's last step.
@@ -20,18 +20,23 @@ pub struct TargetMetrics {
 /// Step metrics of each target profile's last step, on the physical signal, in target order
 /// (current targets and targets without steps have none). `samples` are in time order.
 ///
-/// One pass over the samples collects every target's series: a long run's samples do not
-/// fit in the caches, and reading them once per target cost as much as a tenth of the run.
+/// One pass over the samples folds every target's figures at once, without collecting its
+/// series: a long run's samples do not fit in the caches (reading them once per target cost
+/// as much as a tenth of the run), and the series of a minute-long run were megabytes of
+/// fresh memory.
 pub(super) fn target_metrics(targets: &[TargetSpec], samples: &[Sample]) -> Vec<TargetMetrics> {
-    /// A target's step and the `(time s, signal, current A)` series after it.
+    /// A target's step and its figures so far.
     struct Step {
         index: usize,
         motor: usize,
         kind: TargetKind,
         at_ms: u64,
-        y0: f64,
-        target: f64,
-        series: Vec<(f64, f64, f64)>,
+        /// Index of the first sample at or after the step.
+        first: usize,
+        figures: StepAccumulator,
+        /// Whether a sample after the step lacks this motor (so the response is shorter
+        /// than announced to `figures`).
+        gap: bool,
     }
     let signal = |kind: TargetKind, s: &MotorSample| match kind {
         TargetKind::Rpm => s.true_rpm,
@@ -43,7 +48,6 @@ pub(super) fn target_metrics(targets: &[TargetSpec], samples: &[Sample]) -> Vec<
         .filter(|(_, spec)| spec.kind != TargetKind::Current)
         .filter_map(|(index, spec)| {
             let &(at_ms, value) = spec.steps.last()?;
-            // The first sample at or after the step.
             let first = samples.partition_point(|s| s.t_ms < at_ms);
             let before = samples.get(first)?.motors.get(spec.motor)?;
             let y0 = signal(spec.kind, before);
@@ -52,40 +56,57 @@ pub(super) fn target_metrics(targets: &[TargetSpec], samples: &[Sample]) -> Vec<
                 TargetKind::AngleDeg => y0 + f64::from(wrap_deg_180(value - y0 as f32)),
                 _ => f64::from(value),
             };
+            let len = samples.len() - first;
             Some(Step {
                 index,
                 motor: spec.motor,
                 kind: spec.kind,
                 at_ms,
-                y0,
-                target,
-                series: Vec::with_capacity(samples.len().saturating_sub(first)),
+                first,
+                figures: StepAccumulator::new(len, at_ms as f64 * 1e-3, y0, target),
+                gap: false,
             })
         })
         .collect();
-    // What `step_metrics` would collect from separate time, value and current series, built
-    // in one go for every target.
-    let earliest = steps.iter().map(|s| s.at_ms).min().unwrap_or(u64::MAX);
-    let from = samples.partition_point(|s| s.t_ms < earliest);
-    for s in samples.get(from..).unwrap_or(&[]) {
+    let earliest = steps.iter().map(|s| s.first).min().unwrap_or(samples.len());
+    for s in samples.get(earliest..).unwrap_or(&[]) {
         let t_s = s.t_ms as f64 * 1e-3;
         for step in &mut steps {
             // `t_ms ≥ at_ms` already gives `t ≥ t0_s` (the same rounded scaling of both).
-            if s.t_ms >= step.at_ms
-                && let Some(m) = s.motors.get(step.motor)
-            {
-                step.series
-                    .push((t_s, signal(step.kind, m), m.current_amps));
+            if s.t_ms >= step.at_ms {
+                match s.motors.get(step.motor) {
+                    Some(m) => step.figures.push(t_s, signal(step.kind, m), m.current_amps),
+                    None => step.gap = true,
+                }
             }
         }
     }
     steps
         .into_iter()
-        .map(|step| TargetMetrics {
-            target: step.index,
-            motor: step.motor,
-            kind: step.kind,
-            metrics: step_metrics_of(&step.series, step.at_ms as f64 * 1e-3, step.y0, step.target),
+        .map(|step| {
+            let metrics = if step.gap {
+                // Samples without the motor (not from a run, whose samples all hold every
+                // motor): the response is the samples that have it.
+                let series: Vec<(f64, f64, f64)> = samples
+                    .get(step.first..)
+                    .unwrap_or(&[])
+                    .iter()
+                    .filter_map(|s| {
+                        let m = s.motors.get(step.motor)?;
+                        Some((s.t_ms as f64 * 1e-3, signal(step.kind, m), m.current_amps))
+                    })
+                    .collect();
+                let f = step.figures.finish();
+                step_metrics_of(&series, step.at_ms as f64 * 1e-3, f.initial, f.target)
+            } else {
+                step.figures.finish()
+            };
+            TargetMetrics {
+                target: step.index,
+                motor: step.motor,
+                kind: step.kind,
+                metrics,
+            }
         })
         .collect()
 }
@@ -155,5 +176,34 @@ mod tests {
         assert_eq!(angle.metrics.rise_time_s, None);
         // The 5 A at 1 ms came before this target's step.
         assert_eq!(angle.metrics.peak_current_amps, 0.0);
+    }
+
+    #[test]
+    fn samples_without_the_motor_are_left_out_of_its_response() {
+        // Motor 1's ramp (10 rpm/ms from 5 ms to 100 rpm at 15 ms) without its samples at
+        // 6–8 ms: 10 % is first seen at 9 ms (40 rpm), 90 % at 14 ms: rise 5 ms. The IAE
+        // integrates each kept sample over the interval to the next: 4 ms · 100 rpm from 5
+        // ms, then 1 ms each at 60, 50 … 10 rpm: 0.4 + 0.21 = 0.61 rpm·s. 13 samples from
+        // the step: the tail is the last one (100 rpm), no error.
+        let samples: Vec<Sample> = samples()
+            .into_iter()
+            .map(|mut s| {
+                if (6..=8).contains(&s.t_ms) {
+                    s.motors.truncate(1);
+                }
+                s
+            })
+            .collect();
+        let targets = [TargetSpec {
+            motor: 1,
+            kind: TargetKind::Rpm,
+            steps: vec![(5, 100.0)],
+        }];
+        let m = target_metrics(&targets, &samples);
+        let f = &m[0].metrics;
+        assert!((f.rise_time_s.unwrap() - 0.005).abs() < 1e-12, "{f:?}");
+        assert!((f.iae - 0.61).abs() < 1e-9, "{f:?}");
+        assert_eq!(f.steady_state_error, 0.0);
+        assert!((f.settling_time_s.unwrap() - 0.010).abs() < 1e-12, "{f:?}");
     }
 }
