@@ -109,11 +109,13 @@ fn positive(x: f32) -> Result<f32, ChassisError> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum MecanumRollers {
-    /// The common arrangement: the rollers touching the ground form an "O" seen from above
-    /// (an "X" when the chassis is turned over). Strafing left spins front-left backwards.
+    /// The common arrangement: the rollers touching the ground form an "O" (a diamond), seen
+    /// from above or from below alike; the rollers on top of an upright chassis, the ones you
+    /// see, form an "X". Strafing left spins front-left backwards.
     #[default]
     O,
-    /// The mirrored arrangement (rollers form an "X" from above). Its wheels turn the chassis
+    /// The mirrored arrangement: the rollers touching the ground form an "X" (those on top of
+    /// an upright chassis an "O"). Its wheels turn the chassis
     /// with a lever of half the wheelbase *minus* half the track, not plus: a near-square X
     /// chassis can barely spin (huge wheel rpm per rad/s), and its odometry divides by that
     /// small difference, so wheel-speed noise becomes large yaw-rate errors. An exactly square
@@ -532,11 +534,21 @@ impl TwistLimiter {
 }
 
 /// Clamps each axis of a twist to `±max` (m/s, m/s, rad/s): for commands from a remote.
+/// Limits are taken by magnitude; an infinite one leaves its axis free, a NaN one holds it at
+/// 0 (as [`TwistLimiter`] does: a limit computed from bad numbers stops that axis rather than
+/// freeing it). A NaN command on an axis is 0.
 pub fn clamp_twist(twist: Twist, max: Twist) -> Twist {
+    let clamp = |value: f32, limit: f32| {
+        if limit.is_nan() {
+            0.0
+        } else {
+            saturate(value, limit)
+        }
+    };
     Twist::new(
-        saturate(twist.vx_m_s, max.vx_m_s),
-        saturate(twist.vy_m_s, max.vy_m_s),
-        saturate(twist.omega_rad_s, max.omega_rad_s),
+        clamp(twist.vx_m_s, max.vx_m_s),
+        clamp(twist.vy_m_s, max.vy_m_s),
+        clamp(twist.omega_rad_s, max.omega_rad_s),
     )
 }
 

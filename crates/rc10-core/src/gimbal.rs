@@ -7,7 +7,8 @@ use crate::math::{constrain, floor, wrap_deg_180, wrap_deg_360};
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GimbalLimits {
-    /// Lowest pitch, degrees (negative is down).
+    /// Lowest pitch, degrees (negative is down). Reversed pitch bounds are swapped; a NaN or
+    /// infinite bound leaves that side open, as for the yaw range (check a computed limit).
     pub pitch_min_deg: f32,
     /// Highest pitch, degrees.
     pub pitch_max_deg: f32,
@@ -33,6 +34,13 @@ pub struct GimbalTarget {
     /// lie within the yaw range, if it has one), the nearest to where the motor is now. With a
     /// yaw range that cannot reach the target heading, the nearer end of the range.
     pub yaw_motor_deg: f32,
+    /// The heading to point at relative to the chassis, degrees in [−180, 180) (not limited
+    /// by a yaw range). For a slip-ring yaw, `set_target_angle_deg(wrap_deg_360(..))` of it
+    /// in single-turn angle mode stays exact however long the chassis spins: the angle
+    /// loop's circular error takes the short way. `yaw_motor_deg` is a multi-turn f32, whose
+    /// resolution falls as the turns add up (steps of 1/64° past 131 072°, four minutes of
+    /// spinning at 1.5 rev/s; 1/8° past 1 048 576°, half an hour).
+    pub yaw_relative_deg: f32,
     /// Pitch target within the limits, degrees.
     pub pitch_deg: f32,
 }
@@ -53,6 +61,7 @@ impl GimbalLimits {
     /// // motor is at 700° (multi-turn, ≡ −20°), so it turns +40° to 740°, not back 680°.
     /// let t = g.targets(-170.0, 45.0, 170.0, 700.0).unwrap();
     /// assert!((t.yaw_motor_deg - 740.0).abs() < 1e-3);
+    /// assert!((t.yaw_relative_deg - 20.0).abs() < 1e-3);
     /// assert_eq!(t.pitch_deg, 30.0); // clamped
     /// ```
     pub fn targets(
@@ -75,6 +84,7 @@ impl GimbalLimits {
         };
         Some(GimbalTarget {
             yaw_motor_deg,
+            yaw_relative_deg: relative,
             pitch_deg: constrain(pitch_deg, self.pitch_min_deg, self.pitch_max_deg),
         })
     }
@@ -133,6 +143,18 @@ mod tests {
         assert!((t.yaw_motor_deg - 370.0).abs() < 1e-3);
         let t = SLIP_RING.targets(-10.0, 0.0, 0.0, -720.0).unwrap();
         assert!((t.yaw_motor_deg + 730.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_relative_heading_stays_exact_after_an_hour_of_spinning() {
+        // An hour at 1.5 rev/s: the yaw motor's multi-turn angle is near 1.94e6°, where an
+        // f32 steps by 1/8°. World target 33.3°, chassis at 10°: 23.3° relative, exactly, and
+        // the single-turn angle mode's target is that, whatever the multi-turn angle.
+        let t = SLIP_RING.targets(33.3, 0.0, 10.0, 1_944_000.0).unwrap();
+        assert!((t.yaw_relative_deg - 23.3).abs() < 1e-4, "{t:?}");
+        // A chassis heading past ±180° wraps: world −170°, chassis 170° → 20°.
+        let t = SLIP_RING.targets(-170.0, 0.0, 170.0, 0.0).unwrap();
+        assert!((t.yaw_relative_deg - 20.0).abs() < 1e-4, "{t:?}");
     }
 
     #[test]

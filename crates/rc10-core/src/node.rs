@@ -278,7 +278,7 @@ impl core::error::Error for FrameError {}
 /// assert_eq!(batch.frames().len(), 1);
 /// assert_eq!(batch.frames()[0].data(), &[0, 0, 0x03, 0xE8, 0, 0, 0xFF, 0xFF]);
 /// ```
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct TxBatch {
     frames: heapless::Vec<CanFrame, MAX_FRAMES_PER_TICK>,
     /// Bit `i` set: frame `i` is a shared slot frame (only these take slot writes).
@@ -293,6 +293,14 @@ pub struct TxBatch {
 
 /// [`TxBatch`]'s "no slot frame written yet": above every standard ID, so no slot matches it.
 const NO_SLOT_FRAME: (u16, u8) = (u16::MAX, 0);
+
+impl Default for TxBatch {
+    /// An empty batch, as [`TxBatch::new`] (a derived default would remember a slot frame
+    /// with ID 0x000 at index 0 that is not there).
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 impl TxBatch {
     /// An empty batch.
@@ -376,7 +384,7 @@ impl TxBatch {
     /// `pack_command`, so a node can never send what registration did not check.
     #[allow(
         clippy::arithmetic_side_effects,
-        reason = "i < frames.len() ≤ MAX_FRAMES_PER_TICK = 16 and dropped ≤ i"
+        reason = "i < frames.len() ≤ MAX_FRAMES_PER_TICK = 16 (shifts by at most 16 in 32 bits) and dropped ≤ i"
     )]
     pub fn keep_declared(&mut self, from: usize, frames_per_tick: u8, sends: &IdSet) -> u32 {
         let mut whole = 0u8;
@@ -393,9 +401,13 @@ impl TxBatch {
                 // Frames after `i` moved down: the remembered slot frame may have moved.
                 self.last_slot = NO_SLOT_FRAME;
                 // Slot-frame flags above `i` move down with their frames.
-                let below = self.slot_frames & ((1u16 << i) - 1);
-                let above = (self.slot_frames >> (i + 1)) << i;
-                self.slot_frames = below | above;
+                // In 32 bits: `i + 1` reaches 16 when the 16th frame goes, a full shift of a
+                // u16 (a panic with overflow checks, bit 0 copied to bit 15 without).
+                let flags = u32::from(self.slot_frames);
+                let below = flags & ((1u32 << i) - 1);
+                let above = (flags >> (i + 1)) << i;
+                // Both below bit 16: `above` has lost the top flag's place, `below` is under i.
+                self.slot_frames = (below | above) as u16;
                 dropped += 1;
             } else {
                 i += 1;
@@ -528,6 +540,42 @@ mod tests {
         b.write_slot(CommandSlot::new(0x200, 2).unwrap(), 0x0506);
         assert_eq!(b.frames().len(), 1);
         assert_eq!(b.frames()[0].data(), &[0, 0, 0, 0, 5, 6, 0, 0]);
+    }
+
+    #[test]
+    fn dropping_the_sixteenth_frame_keeps_the_slot_flags_right() {
+        // A slot frame at index 0, 14 declared whole frames, then a 16th frame on an
+        // undeclared ID: dropping it shifts the flags by 16 places (a u16 cannot).
+        let mut b = TxBatch::new();
+        b.write_slot(CommandSlot::new(0x200, 0).unwrap(), 1);
+        for k in 0..14u8 {
+            b.push(CanFrame::standard(0x301, &[k]).unwrap()).unwrap();
+        }
+        b.push(CanFrame::standard(0x305, &[0xEE]).unwrap()).unwrap();
+        assert_eq!(b.frames().len(), MAX_FRAMES_PER_TICK);
+        let sends = IdSet::one(IdFilter::standard(0x301));
+        assert_eq!(b.keep_declared(1, 14, &sends), 1);
+        assert_eq!(b.frames().len(), 15);
+        // Only frame 0 is a slot frame: a whole frame pushed into the freed place is judged
+        // as one (dropped: one over the 14 declared), not skipped as a slot frame.
+        b.push(CanFrame::standard(0x301, &[0xFF]).unwrap()).unwrap();
+        assert_eq!(b.keep_declared(1, 14, &sends), 1);
+        assert_eq!(b.frames().len(), 15);
+        // And a slot write for another command ID makes its own frame, not a merge into it.
+        b.write_slot(CommandSlot::new(0x1FF, 1).unwrap(), 0x0203);
+        assert_eq!(b.frames().len(), 16);
+        assert_eq!(b.frames()[15].data(), &[0, 0, 2, 3, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn a_default_batch_is_an_empty_one() {
+        // Slot ID 0x000 is a valid standard ID: a default batch must not think it already
+        // holds that slot frame.
+        let mut b = TxBatch::default();
+        assert!(b.write_slot(CommandSlot::new(0x000, 1).unwrap(), 0x0102));
+        assert_eq!(b.frames().len(), 1);
+        assert_eq!(b.frames()[0].raw_id(), 0x000);
+        assert_eq!(b.frames()[0].data(), &[0, 0, 1, 2, 0, 0, 0, 0]);
     }
 
     #[test]

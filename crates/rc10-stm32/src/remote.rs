@@ -48,7 +48,9 @@ pub fn sbus_config(inverted: bool) -> usart::Config {
 /// whole frame or part of one. Each byte is stamped back from the moment the chunk was read:
 /// the last byte then, byte `i` of `n` at `read − (n − 1 − i) · byte_time`. Bytes of a frame
 /// thus stay `byte_time` apart even when the DMA splits the frame, and the decoder's frame gap
-/// (1 ms) finds frame boundaries and nothing else. UART errors (framing, parity, overrun) are
+/// ([`FRAME_GAP`](rc10_core::remote::FRAME_GAP), 2.5 ms) finds frame boundaries as long as
+/// this task reads each chunk within about 2.3 ms of its end: run it where nothing holds the
+/// executor that long (or on an interrupt executor). UART errors (framing, parity, overrun) are
 /// counted in [`Shared::input_errors`]; the decoder resynchronises on the next frame gap.
 pub async fn run_uart_receiver<F: ReceiverFrame, const N: usize>(
     mut rx: RingBufferedUartRx<'static>,

@@ -206,9 +206,12 @@ pub trait ReceiverFrame: Copy {
     }
 }
 
-/// Gap between the frames of DBUS and SBUS streams: bytes of a frame are about 110 µs apart,
-/// frames 7–14 ms.
-const FRAME_GAP: Duration = Duration::from_millis(1);
+/// Silence that ends a frame of a DBUS or SBUS stream. The bytes of a frame are 110–120 µs
+/// apart; the silence between frames is 12 ms on DBUS (an 18-byte frame every 14 ms) and at
+/// least 4 ms on SBUS (a 25-byte frame every 7 ms at the fastest). 2.5 ms sits between them
+/// and leaves the UART task 2.3 ms to be late with the second half of a frame the DMA split
+/// (its bytes are stamped back from when they were read; see [`Shared::push_bytes_ending_at`]).
+pub const FRAME_GAP: Duration = Duration::from_micros(2500);
 
 /// A receiver of `N`-byte frames of type `F`, fed byte by byte (UART RX interrupt, framed by
 /// line silence) or frame by frame (UART idle-line DMA); see [`dbus::DbusReceiver`] and
@@ -295,14 +298,15 @@ pub fn normalize(raw: u16, center: u16, half_range: u16, deadband: f32) -> f32 {
 
 /// A receiver shared between the task that feeds it bytes (UART DMA, an edge interrupt) and
 /// the tasks that read its signal, in a `static`. Each access holds a critical section for
-/// the few instructions of one call.
+/// one call: a reader's few instructions, or a feeder's whole chunk (a 64-byte DMA chunk,
+/// with the up to three frames it completes, is a few microseconds on a 170 MHz G4).
 ///
 /// ```
 /// use rc10_core::remote::Shared;
 /// use rc10_core::remote::dbus::DbusReceiver;
 /// use rc10_core::time::{Duration, Instant};
 /// static DR16: Shared<DbusReceiver> = Shared::new(DbusReceiver::new(Duration::from_millis(100)));
-/// // UART task: DR16.push_bytes(&chunk, now). Control task:
+/// // UART task: DR16.push_bytes_ending_at(&chunk, now, byte_time). Control task:
 /// let sticks = DR16.with(|r| r.signal(Instant::from_millis(5)).value);
 /// assert_eq!(sticks.stick(0, 0.0), 0.0); // nothing received yet: neutral
 /// ```
@@ -343,7 +347,10 @@ impl<R> Shared<R> {
 }
 
 impl<F: ReceiverFrame, const N: usize> Shared<FrameReceiver<F, N>> {
-    /// Feeds bytes that arrived together at `now` (one DMA chunk).
+    /// Feeds bytes that all arrived at `now`: for bytes read one at a time (a UART RX
+    /// interrupt). A DMA chunk holds bytes that arrived over up to 64 byte times: feed it with
+    /// [`push_bytes_ending_at`](Self::push_bytes_ending_at), or a frame the DMA split over two
+    /// chunks looks like two pieces a gap apart and is dropped.
     pub fn push_bytes(&self, bytes: &[u8], now: Instant) {
         self.with(|r| {
             for b in bytes {
@@ -417,10 +424,43 @@ mod shared_tests {
         let naive: Shared<DbusReceiver> =
             Shared::new(DbusReceiver::new(Duration::from_millis(100)));
         naive.push_bytes(&frame[..9], t1);
-        naive.push_bytes(&frame[9..], t2 + Duration::from_millis(1));
+        naive.push_bytes(&frame[9..], t2 + Duration::from_millis(2));
         naive.push_bytes(&frame, t3);
         assert!(naive.with(|r| r.link().frames()) < 2);
         assert!(naive.with(|r| r.link().errors()) >= 1);
+    }
+
+    #[test]
+    fn a_split_frame_survives_a_uart_task_two_ms_late() {
+        // The second half of a split frame read 2.2 ms after the line went idle (the task
+        // was busy): its bytes are stamped 2.2 ms late, 2.31 ms after the first half's last
+        // byte (under the 2.5 ms gap). Still one frame.
+        let rx: Shared<DbusReceiver> = Shared::new(DbusReceiver::new(Duration::from_millis(100)));
+        let frame = neutral_dbus();
+        let byte = Duration::from_micros(110);
+        let t1 = Instant::from_millis(100);
+        rx.push_bytes_ending_at(&frame[..9], t1, byte);
+        let t2 = t1 + byte * 9 + Duration::from_micros(2200);
+        rx.push_bytes_ending_at(&frame[9..], t2, byte);
+        assert_eq!(rx.with(|r| r.link().frames()), 1);
+        assert_eq!(rx.with(|r| r.link().errors()), 0);
+    }
+
+    #[test]
+    fn sbus_frames_at_the_fastest_rate_stay_apart() {
+        // SBUS at 7 ms: 25 bytes of 120 µs (3 ms), then 4 ms of silence; a frame whose last
+        // byte is missing is cut by that silence, and the next frame still decodes.
+        let rx: Shared<sbus::SbusReceiver> =
+            Shared::new(sbus::SbusReceiver::new(Duration::from_millis(100)));
+        let byte = Duration::from_micros(120);
+        let mut frame = [0u8; 25];
+        frame[0] = 0x0F; // header; channels, flags and footer 0
+        let start = Instant::from_millis(10);
+        rx.push_bytes_ending_at(&frame[..24], start + byte * 23, byte);
+        let next = start + Duration::from_millis(7);
+        rx.push_bytes_ending_at(&frame, next + byte * 24, byte);
+        assert_eq!(rx.with(|r| r.link().frames()), 1);
+        assert_eq!(rx.with(|r| r.link().errors()), 1);
     }
 }
 

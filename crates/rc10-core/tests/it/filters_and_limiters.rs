@@ -71,6 +71,16 @@ fn clamp_twist_limits_each_axis() {
 }
 
 #[test]
+fn clamp_twist_holds_an_axis_with_a_nan_limit_and_frees_one_with_an_infinite_limit() {
+    let max = Twist::new(f32::NAN, f32::INFINITY, -1.0);
+    let t = clamp_twist(Twist::new(5.0, -40.0, 3.0), max);
+    assert_eq!((t.vx_m_s, t.vy_m_s, t.omega_rad_s), (0.0, -40.0, 1.0));
+    // A NaN command is 0 whatever the limit.
+    let t = clamp_twist(Twist::new(f32::NAN, f32::NAN, 0.5), max);
+    assert_eq!((t.vx_m_s, t.vy_m_s, t.omega_rad_s), (0.0, 0.0, 0.5));
+}
+
+#[test]
 fn ramp_reset_jumps_to_a_finite_value() {
     let mut r = Ramp::new(1000.0, 0.0);
     r.reset(250.0);

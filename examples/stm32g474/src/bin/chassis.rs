@@ -39,7 +39,7 @@ const fn m3508(id: u8) -> DjiMotor {
     }
 }
 
-/// Front left, front right, rear right, rear left.
+/// C620 ids 1–4: front left, front right, rear left, rear right (`LinearChassis::mecanum`'s order).
 static WHEELS: [DjiMotor; 4] = [m3508(1), m3508(2), m3508(3), m3508(4)];
 static BUS: StaticCell<G4Bus> = StaticCell::new();
 static DR16: Shared<DbusReceiver> = Shared::new(DbusReceiver::new(Duration::from_millis(100)));

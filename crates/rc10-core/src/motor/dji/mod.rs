@@ -11,7 +11,8 @@
 //!
 //! Command slots are int16 big-endian. Feedback (1 kHz, DLC 8): D0–1 rotor angle 0–8191,
 //! D2–3 rotor speed rpm (i16), D4–5 torque current (i16, on the current command's scale:
-//! ±16384 ↔ ±20 A / ±10 A / ±3 A; a GM6020 in voltage mode reports it on the ±3 A scale), D6
+//! ±16384 ↔ ±20 A (C620), ±10000 ↔ ±10 A (C610), ±16384 ↔ ±3 A (GM6020, which reports it on
+//! that scale in voltage mode too)), D6
 //! temperature °C (not on the C610), all big-endian. Speeds and angles are converted once, on
 //! reception, to the output shaft through the exact gear ratio.
 //!
@@ -26,7 +27,10 @@
 //! M3508 with id 5 and a GM6020 with id 1 both answer on 0x205).
 
 use super::cascade::{Cascade, CascadeConfig, Measured};
-use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError, ThermalLimits};
+use super::{
+    ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,
+    ThermalLimits,
+};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::{DJI_COUNTS_PER_REV, Encoder, EncoderConfig, GearRatio, Origin};
 use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
@@ -160,7 +164,10 @@ impl DjiModel {
 pub struct DjiConfig {
     /// Speed and angle loops.
     pub cascade: CascadeConfig,
-    /// Offline timeout, multi-turn policy and thermal limits.
+    /// Offline timeout, multi-turn policy and thermal limits. Default: 100 ms; the geared
+    /// M3508 and M2006 continue counting when their feedback returns, the GM6020 restarts
+    /// from its absolute encoder ([`MultiTurnOnReturn::Restart`]: it reads its true angle
+    /// within ±180° of its zero, however far the gimbal was turned while it was off).
     pub health: HealthConfig,
     /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
     /// firmware); must be within 1–30000, the protocol's range. Ignored by the other models.
@@ -224,7 +231,15 @@ impl DjiConfig {
                 angle,
                 angle_divider: 10,
             },
-            health: HealthConfig::DEFAULT.with_thermal(thermal),
+            health: match model {
+                DjiModel::M3508 | DjiModel::M2006 => HealthConfig::DEFAULT,
+                // Its absolute encoder reads the true angle on return; continuing would trust
+                // that the gimbal moved less than half a turn while the motor was unpowered.
+                DjiModel::Gm6020Voltage | DjiModel::Gm6020Current => {
+                    HealthConfig::DEFAULT.with_on_return(MultiTurnOnReturn::Restart)
+                }
+            }
+            .with_thermal(thermal),
             voltage_raw_limit: 25000,
             origin: match model {
                 DjiModel::M3508 | DjiModel::M2006 => Origin::PowerOn,
@@ -622,7 +637,7 @@ impl DjiMotor {
             return Err(FrameError::OutOfRange);
         }
         if s.awaiting_return {
-            if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
+            if self.config.health.on_return == MultiTurnOnReturn::Restart {
                 s.encoder.reset();
             }
             s.awaiting_return = false;

@@ -367,6 +367,27 @@ fn multi_turn_restart_policy_restarts_total_angle() {
 }
 
 #[test]
+fn gm6020_reads_its_true_angle_when_it_returns() {
+    // A cable-limited yaw at +160° (raw 3641 ≈ 160.0°) loses power and is turned the long
+    // way, through 0, to −160° (raw 4551 = −3641 counts). Continuing would add the wrapped
+    // step (+40°) to 160°: 200°. The absolute encoder says −160°.
+    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    m.update_feedback(&fb(0x205, 3641, 0, 0, 30), T0).unwrap();
+    tick(&m, T0);
+    assert!((m.total_angle_deg().unwrap() - 160.0).abs() < 0.05);
+    tick(&m, T0 + Duration::from_millis(150)); // offline
+    let back = T0 + Duration::from_millis(300);
+    m.update_feedback(&fb(0x205, 4551, 0, 0, 30), back).unwrap();
+    let expect = -3641.0 * 360.0 / 8192.0;
+    assert!((m.total_angle_deg().unwrap() - expect).abs() < 1e-3);
+    // A geared motor keeps counting (its rotor angle says nothing about the output's).
+    assert_eq!(
+        DjiConfig::default_for(DjiModel::M3508).health.on_return,
+        MultiTurnOnReturn::Continue
+    );
+}
+
+#[test]
 fn multi_turn_continue_policy_keeps_counting() {
     let m = DjiMotor::m2006(1).unwrap();
     m.update_feedback(&fb(0x201, 0, 0, 0, 0), T0).unwrap();
