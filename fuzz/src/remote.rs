@@ -10,8 +10,29 @@ use rc10_core::time::{Duration, Instant};
 /// The receivers' link timeout in these targets.
 pub const TIMEOUT_US: u64 = 100_000;
 
-/// Bytes of one frame are at most this far apart (the receiver's frame gap: 1 ms).
-pub const GAP_US: u64 = 1000;
+/// Bytes of one frame are at most this far apart: the receivers' frame gap, 2.5 ms (the
+/// silence between DBUS frames is 12 ms, between SBUS frames at least 4 ms).
+pub const GAP_US: u64 = 2500;
+
+// The receivers' constant is the same rule: a change to one must be a change to both.
+const _: () = assert!(rc10_core::remote::FRAME_GAP.as_micros() == GAP_US);
+
+/// The gaps control bytes 0xF0–0xFB spell, µs: within a frame, around the frame gap, and
+/// between frames.
+const GAPS_US: [u64; 12] = [
+    1000,
+    2000,
+    2400,
+    GAP_US - 1,
+    GAP_US,
+    GAP_US + 1,
+    3000,
+    4000,
+    6000,
+    8000,
+    10_000,
+    12_000,
+];
 
 /// What the link should report at a time, from the frames accepted so far.
 #[derive(Debug, Clone, Copy)]
@@ -61,7 +82,8 @@ impl<F: Copy + PartialEq + Debug> Default for LinkOracle<F> {
 
 /// How a stream byte's arrival time is spelled in the input: a control byte before each data
 /// byte. Below 0xF0: that many µs after the previous byte (a byte time is ~110 µs at
-/// 100 kbit/s); 0xF0–0xFB: a gap of 1–12 ms; 0xFC: backwards by a u16 of µs; 0xFD: a whole
+/// 100 kbit/s); 0xF0–0xFB: a gap of 1–12 ms (`GAPS_US`: both sides of the frame gap); 0xFC:
+/// backwards by a u16 of µs; 0xFD: a whole
 /// chunk through `Shared::push_bytes_ending_at` (length, byte time in µs, bytes); 0xFE: any
 /// 64-bit time; 0xFF: read the signal at a time up to 255 ms later without a byte.
 pub fn run_stream<F, const N: usize>(
@@ -87,7 +109,10 @@ pub fn run_stream<F, const N: usize>(
         };
         match ctl {
             0..=0xEF => now = now.saturating_add(u64::from(ctl)),
-            0xF0..=0xFB => now = now.saturating_add(u64::from(ctl - 0xEF) * 1000),
+            0xF0..=0xFB => {
+                let gap = GAPS_US.get(usize::from(ctl - 0xF0)).copied().unwrap_or(0);
+                now = now.saturating_add(gap);
+            }
             0xFC => now = now.saturating_sub(u64::from(u16::arbitrary(&mut u).unwrap_or(0))),
             0xFD => {
                 let len = usize::from(u8::arbitrary(&mut u).unwrap_or(0));

@@ -534,9 +534,9 @@ impl TwistLimiter {
 }
 
 /// Clamps each axis of a twist to `±max` (m/s, m/s, rad/s): for commands from a remote.
-/// Limits are taken by magnitude; an infinite one leaves its axis free, a NaN one holds it at
-/// 0 (as [`TwistLimiter`] does: a limit computed from bad numbers stops that axis rather than
-/// freeing it). A NaN command on an axis is 0.
+/// Limits are taken by magnitude; an infinite one leaves its axis free, a NaN one holds that
+/// axis at 0 (a limit computed from bad numbers stops the axis rather than freeing it;
+/// [`TwistLimiter`] reads a NaN limit as 0 too). A NaN command on an axis is 0.
 pub fn clamp_twist(twist: Twist, max: Twist) -> Twist {
     let clamp = |value: f32, limit: f32| {
         if limit.is_nan() {

@@ -21,7 +21,10 @@ pub struct GimbalLimits {
     /// The yaw motor's multi-turn angle must start within the range: rc10 cannot tell a
     /// reading a turn off from the real position. A GM6020 with an absolute origin first
     /// reads within ±180° of its zero, so put the zero in the middle of the range; a range
-    /// wider than ±180° around it needs the gimbal homed (or powered on near its zero).
+    /// wider than ±180° around it needs the gimbal homed (or powered on near its zero). After
+    /// an outage the count continues from before it (`MultiTurnOnReturn::Continue`, right
+    /// when the gimbal moved less than half a turn while off); a range within ±180° of the
+    /// zero may use `Restart`, which reads the absolute angle again.
     pub yaw_range_deg: Option<(f32, f32)>,
 }
 

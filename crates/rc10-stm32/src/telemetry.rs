@@ -50,8 +50,8 @@ impl VofaStats {
     }
 }
 
-/// Sends `channels` as a JustFloat frame every `period` on `tx` (up to 32 channels: more is a
-/// compile error).
+/// Sends `channels` as a JustFloat frame every `period` on `tx` (up to 32 channels: more fails
+/// the build of the firmware that spawns it).
 /// At 921 600 baud a frame of 8 channels (36 bytes) takes 0.4 ms: 1 kHz is possible; 115 200
 /// baud manages about 300 Hz.
 pub async fn run_vofa<const N: usize>(

@@ -244,13 +244,12 @@ pub trait Motor: Sync {
 pub enum MultiTurnOnReturn {
     /// Continue counting from the last reading before the outage, assuming the rotor moved
     /// less than half a turn meanwhile (M3508: ±9.4° at the output). Right for a wheel or an
-    /// arm that was held still while the ESC was unpowered; the default (`DjiConfig` uses
-    /// it for the geared M3508 and M2006).
+    /// arm that was held still while the ESC was unpowered; the default.
     #[default]
     Continue,
     /// Start again from the encoder origin, as after power-on (for a geared motor the total
     /// angle restarts at 0; for an absolute encoder it restarts at the true angle, within
-    /// half a turn of its zero). `DjiConfig`'s default for the direct-drive GM6020.
+    /// half a turn of its zero: for a GM6020 whose range lies within ±180° of its zero).
     Restart,
 }
 

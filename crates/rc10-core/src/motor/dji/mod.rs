@@ -27,10 +27,7 @@
 //! M3508 with id 5 and a GM6020 with id 1 both answer on 0x205).
 
 use super::cascade::{Cascade, CascadeConfig, Measured};
-use super::{
-    ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,
-    ThermalLimits,
-};
+use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError, ThermalLimits};
 use crate::can::{CanFrame, IdFilter};
 use crate::encoder::{DJI_COUNTS_PER_REV, Encoder, EncoderConfig, GearRatio, Origin};
 use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
@@ -164,10 +161,14 @@ impl DjiModel {
 pub struct DjiConfig {
     /// Speed and angle loops.
     pub cascade: CascadeConfig,
-    /// Offline timeout, multi-turn policy and thermal limits. Default: 100 ms; the geared
-    /// M3508 and M2006 continue counting when their feedback returns, the GM6020 restarts
-    /// from its absolute encoder ([`MultiTurnOnReturn::Restart`]: it reads its true angle
-    /// within ±180° of its zero, however far the gimbal was turned while it was off).
+    /// Offline timeout, multi-turn policy and thermal limits. Default: 100 ms, and every
+    /// model continues counting when its feedback returns ([`MultiTurnOnReturn::Continue`]:
+    /// right when the output moved less than half a turn while the motor was off, as in a
+    /// referee power cut). A GM6020 gimbal whose yaw stays within ±180° of its zero but may
+    /// be turned further by hand while unpowered can use [`MultiTurnOnReturn::Restart`]: it
+    /// then reads its absolute angle on return. Not for a yaw range wider than ±180° (a
+    /// homed ±270° yaw at 200° would come back reading −160°) or a slip-ring yaw holding a
+    /// multi-turn target (it would unwind the turns).
     pub health: HealthConfig,
     /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
     /// firmware); must be within 1–30000, the protocol's range. Ignored by the other models.
@@ -231,15 +232,7 @@ impl DjiConfig {
                 angle,
                 angle_divider: 10,
             },
-            health: match model {
-                DjiModel::M3508 | DjiModel::M2006 => HealthConfig::DEFAULT,
-                // Its absolute encoder reads the true angle on return; continuing would trust
-                // that the gimbal moved less than half a turn while the motor was unpowered.
-                DjiModel::Gm6020Voltage | DjiModel::Gm6020Current => {
-                    HealthConfig::DEFAULT.with_on_return(MultiTurnOnReturn::Restart)
-                }
-            }
-            .with_thermal(thermal),
+            health: HealthConfig::DEFAULT.with_thermal(thermal),
             voltage_raw_limit: 25000,
             origin: match model {
                 DjiModel::M3508 | DjiModel::M2006 => Origin::PowerOn,
@@ -637,7 +630,7 @@ impl DjiMotor {
             return Err(FrameError::OutOfRange);
         }
         if s.awaiting_return {
-            if self.config.health.on_return == MultiTurnOnReturn::Restart {
+            if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
                 s.encoder.reset();
             }
             s.awaiting_return = false;

@@ -367,11 +367,13 @@ fn multi_turn_restart_policy_restarts_total_angle() {
 }
 
 #[test]
-fn gm6020_reads_its_true_angle_when_it_returns() {
+fn gm6020_with_the_restart_policy_reads_its_true_angle_when_it_returns() {
     // A cable-limited yaw at +160° (raw 3641 ≈ 160.0°) loses power and is turned the long
     // way, through 0, to −160° (raw 4551 = −3641 counts). Continuing would add the wrapped
-    // step (+40°) to 160°: 200°. The absolute encoder says −160°.
-    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    // step (+40°) to 160°: 200°. With `Restart`, the absolute encoder says −160°.
+    let mut cfg = DjiConfig::default_for(DjiModel::Gm6020Voltage);
+    cfg.health = cfg.health.with_on_return(MultiTurnOnReturn::Restart);
+    let m = DjiMotor::new(DjiModel::Gm6020Voltage, 1, cfg).unwrap();
     m.update_feedback(&fb(0x205, 3641, 0, 0, 30), T0).unwrap();
     tick(&m, T0);
     assert!((m.total_angle_deg().unwrap() - 160.0).abs() < 0.05);
@@ -380,11 +382,15 @@ fn gm6020_reads_its_true_angle_when_it_returns() {
     m.update_feedback(&fb(0x205, 4551, 0, 0, 30), back).unwrap();
     let expect = -3641.0 * 360.0 / 8192.0;
     assert!((m.total_angle_deg().unwrap() - expect).abs() < 1e-3);
-    // A geared motor keeps counting (its rotor angle says nothing about the output's).
-    assert_eq!(
-        DjiConfig::default_for(DjiModel::M3508).health.on_return,
-        MultiTurnOnReturn::Continue
-    );
+    // By default it continues (right for the usual short power cut, and for ranges wider
+    // than ±180°): the same return reads 200°.
+    let m = DjiMotor::gm6020_voltage(1).unwrap();
+    m.update_feedback(&fb(0x205, 3641, 0, 0, 30), T0).unwrap();
+    tick(&m, T0);
+    tick(&m, T0 + Duration::from_millis(150)); // offline
+    m.update_feedback(&fb(0x205, 4551, 0, 0, 30), back).unwrap();
+    let expect = (3641.0 + 910.0) * 360.0 / 8192.0;
+    assert!((m.total_angle_deg().unwrap() - expect).abs() < 1e-3);
 }
 
 #[test]
