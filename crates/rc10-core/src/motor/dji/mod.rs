@@ -162,13 +162,15 @@ pub struct DjiConfig {
     /// Speed and angle loops.
     pub cascade: CascadeConfig,
     /// Offline timeout, multi-turn policy and thermal limits. Default: 100 ms, and every
-    /// model continues counting when its feedback returns ([`MultiTurnOnReturn::Continue`]:
-    /// right when the output moved less than half a turn while the motor was off, as in a
-    /// referee power cut). A GM6020 gimbal whose yaw stays within ±180° of its zero but may
-    /// be turned further by hand while unpowered can use [`MultiTurnOnReturn::Restart`]: it
-    /// then reads its absolute angle on return. Not for a yaw range wider than ±180° (a
-    /// homed ±270° yaw at 200° would come back reading −160°) or a slip-ring yaw holding a
-    /// multi-turn target (it would unwind the turns).
+    /// model continues counting when its feedback returns
+    /// ([`MultiTurnOnReturn::Continue`](super::MultiTurnOnReturn::Continue): right when the
+    /// output moved less than half a turn while the motor was off, as in a referee power
+    /// cut). A GM6020 gimbal whose yaw stays within ±180° of its zero but may be turned
+    /// further by hand while unpowered can use
+    /// [`MultiTurnOnReturn::Restart`](super::MultiTurnOnReturn::Restart): it then reads its
+    /// absolute angle on return. Not for a yaw range wider than ±180° (a homed ±270° yaw at
+    /// 200° would come back reading −160°) or a slip-ring yaw holding a multi-turn target (it
+    /// would unwind the turns).
     pub health: HealthConfig,
     /// GM6020 voltage mode: the largest raw command sent (default 25000; ±30000 on 2018
     /// firmware); must be within 1–30000, the protocol's range. Ignored by the other models.
