@@ -289,10 +289,36 @@ pub struct TxBatch {
     /// frame here without a search. Only ever a slot frame's true position (reset whenever
     /// frames move); the ID [`NO_SLOT_FRAME`] (no standard ID) when there is none.
     last_slot: (u16, u8),
+    /// The only slot [`write_slot`](Self::write_slot) may write, as [`slot_key`]: while the
+    /// bus packs a node, the slot it declared ([`NO_SLOT`] if none); [`ANY_SLOT`] otherwise.
+    allowed_slot: u32,
+    /// Slot writes refused since the bus last took the count (a node writing a slot it did
+    /// not declare: another motor's, or one on someone's feedback ID).
+    refused_slots: u32,
 }
 
 /// [`TxBatch`]'s "no slot frame written yet": above every standard ID, so no slot matches it.
 const NO_SLOT_FRAME: (u16, u8) = (u16::MAX, 0);
+
+/// [`TxBatch::allowed_slot`]: every slot may be written (a batch used on its own).
+const ANY_SLOT: u32 = u32::MAX;
+/// [`TxBatch::allowed_slot`]: no slot may be written (a node that declared none).
+const NO_SLOT: u32 = u32::MAX - 1;
+
+/// A slot as one number (ID in bits 8–18, index in bits 0–7): never [`ANY_SLOT`] or
+/// [`NO_SLOT`].
+const fn slot_key(slot: CommandSlot) -> u32 {
+    (slot.id as u32) << 8 | slot.index as u32
+}
+
+/// What [`TxBatch::allow_only_slot`] takes for a node that declared `slot` (worked out once,
+/// at registration).
+pub(crate) const fn slot_permission(slot: Option<CommandSlot>) -> u32 {
+    match slot {
+        Some(slot) => slot_key(slot),
+        None => NO_SLOT,
+    }
+}
 
 impl Default for TxBatch {
     /// An empty batch, as [`TxBatch::new`] (a derived default would remember a slot frame
@@ -310,6 +336,8 @@ impl TxBatch {
             slot_frames: 0,
             overflowed: 0,
             last_slot: NO_SLOT_FRAME,
+            allowed_slot: ANY_SLOT,
+            refused_slots: 0,
         }
     }
 
@@ -329,7 +357,17 @@ impl TxBatch {
     /// Slot writes merge only into slot frames: a whole frame [`push`](Self::push)ed on the
     /// same ID is never written into (registration rejects that clash; should it happen
     /// anyway, the two frames stay separate).
+    ///
+    /// While a [`Bus`](crate::bus::Bus) packs a node, only the slot that node declared
+    /// ([`BusUsage::command_slot`]) can be written: any other write returns `false`, changes
+    /// nothing and is counted in `tx_undeclared`, so a node cannot overwrite another motor's
+    /// command or send a slot frame registration did not check.
     pub fn write_slot(&mut self, slot: CommandSlot, value: i16) -> bool {
+        let key = slot_key(slot);
+        if self.allowed_slot != key && self.allowed_slot != ANY_SLOT {
+            self.refused_slots = self.refused_slots.saturating_add(1);
+            return false;
+        }
         let index = match self.last_slot {
             (id, index) if id == slot.id => usize::from(index),
             _ => {
@@ -432,6 +470,19 @@ impl TxBatch {
         self.slot_frames = 0;
         self.overflowed = 0;
         self.last_slot = NO_SLOT_FRAME;
+    }
+
+    /// From now on, only the slot `permission` ([`slot_permission`]) names may be written:
+    /// the bus calls this before each node's `pack_command`, with the slot the node declared.
+    pub(crate) fn allow_only_slot(&mut self, permission: u32) {
+        self.allowed_slot = permission;
+    }
+
+    /// Every slot may be written again; returns how many slot writes were refused since the
+    /// last call (and forgets them).
+    pub(crate) fn allow_any_slot(&mut self) -> u32 {
+        self.allowed_slot = ANY_SLOT;
+        core::mem::take(&mut self.refused_slots)
     }
 }
 

@@ -6,7 +6,9 @@
 //! Every node declares, in its [`BusUsage`](crate::node::BusUsage), every ID it listens on
 //! and every ID it transmits on (whole frames, or a slot in a shared DJI frame). Registration
 //! checks them all against each other, so no frame can be merged into another device's frame,
-//! no two senders share an ID and nothing is sent on an ID a device answers on. It also
+//! no two senders share an ID and nothing is sent on an ID a device answers on; every tick
+//! then holds each node to its declaration (whole frames beyond it are dropped, a write to a
+//! command slot other than its own is refused; both counted in `tx_undeclared`). It also
 //! checks that one tick's command frames fit the transport's TX buffers
 //! ([`BusConfig::tx_depth`], 3 on an STM32G4): rather than refuse some node's frame every
 //! tick (it would time out, forever), a bus that cannot serve every node every tick is
@@ -47,7 +49,7 @@ use crate::can::{
     BusRates, BusStats, CanFrame, CanReceive, CanTransmit, ErrorState, ReceiveError, SendError,
     timing,
 };
-use crate::node::{CanNode, CommandSlot, IdSet, MAX_FRAMES_PER_TICK, TxBatch};
+use crate::node::{CanNode, CommandSlot, IdSet, MAX_FRAMES_PER_TICK, TxBatch, slot_permission};
 use crate::time::{DeltaTime, Duration, Instant};
 use core::cell::RefCell;
 use core::fmt;
@@ -268,6 +270,8 @@ struct Declared {
     frames_per_tick: u8,
     sends: IdSet,
     listen: IdSet,
+    /// The one command slot it may write, as [`TxBatch::allow_only_slot`] takes it.
+    slot_permission: u32,
 }
 
 /// The first standard ID of [`Bus`]'s direct routing table: DJI feedback arrives on
@@ -368,6 +372,7 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
             frames_per_tick: mine.frames_per_tick,
             sends: mine.sends,
             listen: mine.listen,
+            slot_permission: slot_permission(mine.command_slot),
         };
         // Same capacity as `nodes`, which just took the node.
         let _ = self.declared.push(declared);
@@ -535,11 +540,16 @@ impl<'a, const N: usize> Bus<'a, N> {
         }
         for (node, declared) in self.nodes.iter().zip(&self.declared) {
             let from = out.frames().len();
+            out.allow_only_slot(declared.slot_permission);
             node.pack_command(out);
             let dropped = out.keep_declared(from, declared.frames_per_tick, &declared.sends);
             if dropped > 0 {
                 self.stats.record_tx_undeclared(dropped);
             }
+        }
+        let refused = out.allow_any_slot();
+        if refused > 0 {
+            self.stats.record_tx_undeclared(refused);
         }
         if out.overflowed() > 0 {
             self.stats.record_batch_overflow(out.overflowed());

@@ -238,7 +238,9 @@ impl IdFilter {
             Id::Standard(s) if !self.extended => {
                 (u32::from(s.as_raw()) ^ self.id) & self.mask & 0x7FF == 0
             }
-            Id::Extended(e) if self.extended => (e.as_raw() ^ self.id) & self.mask == 0,
+            Id::Extended(e) if self.extended => {
+                (e.as_raw() ^ self.id) & self.mask & 0x1FFF_FFFF == 0
+            }
             _ => false,
         }
     }
@@ -361,6 +363,17 @@ mod tests {
         };
         assert!(b.matches(CanFrame::standard(0x201, &[]).unwrap().id()));
         assert!(a.overlaps(&b) && b.overlaps(&a));
+    }
+
+    #[test]
+    fn bits_beyond_the_extended_id_width_do_not_hide_a_match() {
+        // Bit 29 is no part of a 29-bit ID: the filter matches extended ID 0x07, as its
+        // overlap with the exact filter (and the hardware filter built from it) says.
+        let stray = IdFilter::extended_masked(0x2000_0007, 0xFFFF_FFFF);
+        let id = CanFrame::extended(0x07, &[]).unwrap().id();
+        assert!(stray.matches(id));
+        assert!(stray.overlaps(&IdFilter::extended(0x07)));
+        assert!(!stray.matches(CanFrame::extended(0x08, &[]).unwrap().id()));
     }
 
     #[test]

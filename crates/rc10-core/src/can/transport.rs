@@ -80,7 +80,8 @@ pub struct BusStatus {
     pub state: ErrorState,
     /// Transmit error counter (0–255).
     pub tx_error_count: u8,
-    /// Receive error counter (0–127, 128 meaning "passive").
+    /// Receive error counter (0–127: the FDCAN's ECR.REC is 7 bits wide; a receiver that is
+    /// error-passive shows in `state`).
     pub rx_error_count: u8,
     /// Whether the controller recorded a protocol error (stuff, form, ACK, bit, CRC) since
     /// the last status read.
