@@ -7,8 +7,8 @@
 //! happens ([`SimBus::busy_until`]), completes frames ([`SimBus::complete`]) and starts the next
 //! one ([`SimBus::start_next`]).
 //!
-//! Two controller faults are modelled here: bus-off ([`SimBus::set_mcu_bus_off`]: pending
-//! frames aborted, nothing sent or received) and no acknowledgement
+//! Two controller faults are modelled here: bus-off ([`SimBus::set_mcu_bus_off`]: nothing sent
+//! or received, pending frames held and sent on recovery) and no acknowledgement
 //! ([`SimBus::set_mcu_no_ack`]: the controller is cut off from the other nodes, so its frames
 //! are retransmitted without end and stay in its TX buffers, and it receives nothing).
 
@@ -145,6 +145,18 @@ impl SimBus {
         }
     }
 
+    /// Device `index` loses power: the frames it had queued are gone, and a frame of its on
+    /// the wire breaks off (the bus is free at once; counted in `lost`).
+    pub fn power_off_device(&mut self, index: usize) {
+        if let Some(q) = self.device_tx.get_mut(index) {
+            q.clear();
+        }
+        if matches!(self.on_wire, Some((Sender::Device(d), _, _, _)) if d == index) {
+            self.on_wire = None;
+            self.stats.lost += 1;
+        }
+    }
+
     /// When the frame on the wire ends, if one is.
     pub fn busy_until(&self) -> Option<u64> {
         self.on_wire.map(|(_, _, end, _)| end)
@@ -181,12 +193,12 @@ impl SimBus {
         self.mcu_frames_held()
     }
 
-    /// Puts the controller into bus-off (it sends and receives nothing; its pending TX frames
-    /// are aborted, as the FDCAN does) or lets it recover.
+    /// Puts the controller into bus-off (it sends and receives nothing and refuses new frames)
+    /// or lets it recover. Its pending TX frames stay in their buffers and go out on
+    /// recovery, carrying the commands they were packed with: the FDCAN clears a pending
+    /// request (TXBRP) only when its frame was sent or when software cancels it (TXBCR;
+    /// RM0440), and rc10 cancels nothing.
     pub fn set_mcu_bus_off(&mut self, bus_off: bool) {
-        if bus_off && !self.mcu_bus_off {
-            self.mcu_tx.clear();
-        }
         self.mcu_bus_off = bus_off;
     }
 
@@ -231,8 +243,9 @@ impl SimBus {
     /// Index in `mcu_tx` of the controller's frame that enters arbitration next, per
     /// [`SimBusConfig::mcu_tx_order`].
     fn mcu_next(&self) -> Option<usize> {
-        if self.mcu_no_ack {
-            // Retransmitted on the controller's own side of the cut: nobody else hears it.
+        if self.mcu_no_ack || self.mcu_bus_off {
+            // No ACK: retransmitted on the controller's own side of the cut, nobody else
+            // hears it. Bus-off: held until recovery.
             return None;
         }
         match self.config.mcu_tx_order {
@@ -582,6 +595,55 @@ mod tests {
         );
         assert_eq!(bus.stats().mcu_tx_bus_off, 1);
         assert_eq!(bus.next_mcu_seq(), 0);
+    }
+
+    #[test]
+    fn frames_pending_at_bus_off_go_out_on_recovery() {
+        // Three commands queued, the bus goes off before any starts: none goes out while
+        // off, and all three, in order, after it recovers (the FDCAN keeps its pending
+        // requests; only a sent frame or a cancellation clears them).
+        let mut bus = SimBus::new(SimBusConfig::default());
+        for id in [0x200, 0x1FF, 0x1FE] {
+            bus.mcu_port().try_send(&std_frame(id)).unwrap();
+        }
+        bus.set_mcu_bus_off(true);
+        bus.start_next(0);
+        assert_eq!(bus.busy_until(), None);
+        assert_eq!(bus.mcu_pending(), 3);
+        bus.set_mcu_bus_off(false);
+        let mut now = 1000;
+        for (seq, id) in [0x200, 0x1FF, 0x1FE].into_iter().enumerate() {
+            bus.start_next(now);
+            now = bus.busy_until().unwrap();
+            assert_eq!(
+                bus.complete_with_seq(now),
+                Some((Sender::Mcu, std_frame(id), Some(seq as u64)))
+            );
+        }
+        assert_eq!(bus.mcu_pending(), 0);
+    }
+
+    #[test]
+    fn a_device_that_loses_power_sends_nothing_more() {
+        let mut bus = SimBus::new(SimBusConfig::default());
+        let esc = bus.add_device();
+        let other = bus.add_device();
+        bus.device_send(esc, std_frame(0x201));
+        bus.device_send(esc, std_frame(0x201));
+        bus.device_send(other, std_frame(0x202));
+        bus.start_next(0); // 0x201 wins arbitration and is on the wire
+        bus.power_off_device(esc);
+        assert_eq!(bus.busy_until(), None);
+        assert_eq!(bus.stats().lost, 1);
+        // Only the other device's frame is left.
+        bus.start_next(10);
+        let end = bus.busy_until().unwrap();
+        assert_eq!(
+            bus.complete(end),
+            Some((Sender::Device(other), std_frame(0x202)))
+        );
+        bus.start_next(end);
+        assert_eq!(bus.busy_until(), None);
     }
 
     #[test]

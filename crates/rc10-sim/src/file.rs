@@ -324,14 +324,21 @@ pub fn load(path: &Path) -> Result<Scenario, FileError> {
     parse(&text)
 }
 
+/// The longest run a scenario may ask for, ms: a simulated day (times in µs stay far from
+/// overflowing a u64).
+pub const MAX_DURATION_MS: u64 = 86_400_000;
+
 /// Parses scenario TOML.
 pub fn parse(text: &str) -> Result<Scenario, FileError> {
     let file: FileScenario = toml::from_str(text).map_err(|e| FileError::Syntax(e.to_string()))?;
     if file.motors.is_empty() {
         return Err(invalid("motor".into(), "at least one [[motor]] is needed"));
     }
-    if file.duration_ms == 0 {
-        return Err(invalid("duration_ms".into(), "must be at least 1"));
+    if !(1..=MAX_DURATION_MS).contains(&file.duration_ms) {
+        return Err(invalid(
+            "duration_ms".into(),
+            format!("must be 1 to {MAX_DURATION_MS} (a day)"),
+        ));
     }
     let motor_count = file.motors.len();
     let motor_index = |field: String, motor: usize| {
@@ -430,11 +437,16 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
                 motor,
                 at_ms,
                 celsius,
-            } => Fault::OverTemperature {
-                motor: motor_index(field, motor)?,
-                at_ms,
-                celsius,
-            },
+            } => {
+                if !celsius.is_finite() {
+                    return Err(invalid(field, "celsius must be a finite number"));
+                }
+                Fault::OverTemperature {
+                    motor: motor_index(field, motor)?,
+                    at_ms,
+                    celsius,
+                }
+            }
             FileFault::FrameLoss {
                 probability: p,
                 from_ms,
@@ -465,6 +477,9 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
                 to_ms,
             } => {
                 window(from_ms, to_ms)?;
+                if delay_us > 10_000_000 {
+                    return Err(invalid(field, "delay_us must be at most 10 s"));
+                }
                 Fault::Delay {
                     delay_us,
                     from_ms,
@@ -596,10 +611,17 @@ fn motor_spec(n: usize, m: &FileMotor) -> Result<MotorSpec, FileError> {
         ));
     }
     let l = m.load;
-    if !(l.inertia_kg_m2.is_finite() && l.inertia_kg_m2 >= 0.0 && l.torque_nm.is_finite()) {
+    let step_ok = l
+        .step
+        .is_none_or(|s| s.torque_nm.is_finite() && s.at_ms <= MAX_DURATION_MS);
+    if !(l.inertia_kg_m2.is_finite()
+        && l.inertia_kg_m2 >= 0.0
+        && l.torque_nm.is_finite()
+        && step_ok)
+    {
         return Err(invalid(
             format!("motor[{n}].load"),
-            "inertia must be ≥ 0 and torques finite",
+            "inertia must be ≥ 0, torques finite and the step within a day",
         ));
     }
     let load = Load {
@@ -766,6 +788,35 @@ mod tests {
         assert!(matches!(
             parse(&bad_fault).unwrap_err(),
             FileError::Invalid { field, .. } if field == "fault[1].probability"
+        ));
+        // TOML has `nan` and `inf`: a NaN temperature or torque would fill the trace with NaN.
+        let nan_heat = format!(
+            "{MINIMAL}\n[[fault]]\nkind = \"over_temperature\"\nmotor = 1\nat_ms = 5\ncelsius = nan\n"
+        );
+        assert!(matches!(
+            parse(&nan_heat).unwrap_err(),
+            FileError::Invalid { field, .. } if field.starts_with("fault[1]")
+        ));
+        let nan_step = MINIMAL.replace(
+            "id = 1",
+            "id = 1\nload = { step = { at_ms = 5, torque_nm = inf } }",
+        );
+        assert!(matches!(
+            parse(&nan_step).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "motor[1].load"
+        ));
+        // A delay past every clock (it wrapped to the past) and a run too long to time in µs.
+        let huge_delay = format!(
+            "{MINIMAL}\n[[fault]]\nkind = \"delay\"\ndelay_us = 18446744073709551615\nfrom_ms = 0\nto_ms = 10\n"
+        );
+        assert!(matches!(
+            parse(&huge_delay).unwrap_err(),
+            FileError::Invalid { field, .. } if field.starts_with("fault[1]")
+        ));
+        let forever = MINIMAL.replace("duration_ms = 100", "duration_ms = 86400001");
+        assert!(matches!(
+            parse(&forever).unwrap_err(),
+            FileError::Invalid { field, .. } if field == "duration_ms"
         ));
     }
 

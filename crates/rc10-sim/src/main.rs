@@ -72,6 +72,12 @@ fn find(name: &str) -> Result<Scenario, String> {
 fn run_cmd(args: RunArgs) -> Result<(), String> {
     let mut scenario = find(&args.scenario)?;
     if let Some(d) = args.duration_ms {
+        if !(1..=rc10_sim::file::MAX_DURATION_MS).contains(&d) {
+            return Err(format!(
+                "--duration-ms must be 1 to {} (a day)",
+                rc10_sim::file::MAX_DURATION_MS
+            ));
+        }
         scenario.duration_ms = d;
     }
     if let Some(s) = args.seed {

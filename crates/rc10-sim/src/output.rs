@@ -74,7 +74,7 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
     );
     let _ = writeln!(
         s,
-        "rc10      rx {} (unmatched {}, rejected {}), tx {} (dropped {}, sent late {}), offline events {:?}",
+        "rc10      rx {} (unmatched {}, rejected {}), tx {} (dropped {}, still queued at a tick {} (frame-ticks)), offline events {:?}",
         c.rx_frames,
         c.rx_unmatched,
         c.rx_rejected,

@@ -425,6 +425,11 @@ impl DjiEsc {
         }
     }
 
+    /// Whether the ESC has power (see [`set_powered`](Self::set_powered)).
+    pub fn powered(&self) -> bool {
+        self.powered
+    }
+
     /// Locks or frees the rotor (a stall).
     pub fn set_locked(&mut self, locked: bool) {
         self.locked = locked;

@@ -191,10 +191,10 @@ pub struct BusCounters {
     pub tx_bits: u32,
     /// Frames not queued because the TX buffers were full.
     pub tx_full: u32,
-    /// Frames found still waiting in the TX buffers at the start of a later tick (sent late;
-    /// see [`CanTransmit::still_queued`](super::CanTransmit::still_queued)), counted at every
-    /// tick that finds them: a frame that waits three ticks counts three (frame-ticks of
-    /// delay, so it can exceed the frames queued while nobody acknowledges).
+    /// Frames found still waiting in the TX buffers at the start of a later tick (late, if
+    /// sent at all; see [`CanTransmit::still_queued`](super::CanTransmit::still_queued)),
+    /// counted at every tick that finds them: a frame that waits three ticks counts three
+    /// (frame-ticks of delay, so it can exceed the frames queued while nobody acknowledges).
     pub tx_stale: u32,
     /// Frames not queued because the controller was bus-off.
     pub tx_bus_off: u32,

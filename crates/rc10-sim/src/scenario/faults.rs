@@ -61,7 +61,8 @@ pub enum Fault {
         /// End, ms.
         to_ms: u64,
     },
-    /// The controller is bus-off in `[from_ms, to_ms)`: it sends and receives nothing.
+    /// The controller is bus-off in `[from_ms, to_ms)`: it sends and receives nothing, and
+    /// refuses new frames; those already in its TX buffers go out when it recovers.
     BusOff {
         /// Start, ms.
         from_ms: u64,
@@ -216,7 +217,13 @@ pub(super) fn apply_state_faults(
     for (i, esc) in escs.iter_mut().enumerate() {
         let bit = motor_bit(i);
         if cut & bit != 0 {
-            esc.set_powered(unpowered & bit == 0);
+            let powered = unpowered & bit == 0;
+            if esc.powered() && !powered {
+                // An unpowered ESC sends nothing: not the feedback it had queued, nor the
+                // rest of a frame it was sending.
+                bus.power_off_device(i);
+            }
+            esc.set_powered(powered);
         }
         if stalled & bit != 0 {
             esc.set_locked(locked & bit != 0);

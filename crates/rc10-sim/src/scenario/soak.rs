@@ -1266,17 +1266,21 @@ fn zero_while_offline(scenario: &Scenario, record: &SoakRecord) -> Check {
         ok = false;
         lines.push("FAIL, motors went offline but no frame packed while offline was seen".into());
     }
-    // Frames packed before an outage and sent after it: only out of a no-ACK window's buffers.
+    // Frames packed before an outage and sent after it: only out of the TX buffers that held
+    // them through a no-ACK or bus-off window.
     let depth = SimBusConfig::default().mcu_tx_depth;
-    let no_ack: Vec<(u64, u64)> = scenario
+    let holding: Vec<(u64, u64, &str)> = scenario
         .faults
         .iter()
-        .filter(|f| matches!(f, Fault::NoAck { .. }))
-        .filter_map(window_of)
+        .filter_map(|f| match f {
+            Fault::NoAck { .. } => window_of(f).map(|(a, b)| (a, b, "no-ACK")),
+            Fault::BusOff { .. } => window_of(f).map(|(a, b)| (a, b, "bus-off")),
+            _ => None,
+        })
         .collect();
-    let mut per_window: HashMap<(u64, u64), Vec<&LateFrame>> = HashMap::new();
+    let mut per_window: HashMap<(u64, u64, &str), Vec<&LateFrame>> = HashMap::new();
     for late in &record.late_frames {
-        let held = no_ack.iter().find(|(from, to)| {
+        let held = holding.iter().find(|(from, to, _)| {
             late.packed_us < to * 1000
                 && late.packed_us + TICK_US >= from * 1000
                 && late.t_us >= to * 1000
@@ -1288,7 +1292,7 @@ fn zero_while_offline(scenario: &Scenario, record: &SoakRecord) -> Check {
                 ok = false;
                 lines.push(format!(
                     "FAIL, a command packed at {} for motor {} (raw {}) left at {}, after the \
-                     motor went offline, and not out of a no-ACK window's TX buffers",
+                     motor went offline, and not out of a no-ACK or bus-off window's TX buffers",
                     ms(late.packed_us),
                     late.motor + 1,
                     late.raw,
@@ -1299,7 +1303,7 @@ fn zero_while_offline(scenario: &Scenario, record: &SoakRecord) -> Check {
     }
     let mut windows: Vec<_> = per_window.into_iter().collect();
     windows.sort_unstable_by_key(|(w, _)| *w);
-    for ((_, to), frames) in windows {
+    for ((_, to, kind), frames) in windows {
         let mut times: Vec<u64> = frames.iter().map(|f| f.t_us).collect();
         times.dedup();
         let max_raw = frames
@@ -1315,7 +1319,7 @@ fn zero_while_offline(scenario: &Scenario, record: &SoakRecord) -> Check {
             format!("at most the {depth} TX buffers")
         };
         lines.push(format!(
-            "after the no-ACK window ending {}: {n} frames held through it left within {} \
+            "after the {kind} window ending {}: {n} frames held through it left within {} \
              carrying commands packed before it (|raw| up to {max_raw}) to motors rc10 had \
              called offline ({verdict}); frames in the TX buffers cannot be withdrawn",
             ms(to * 1000),
