@@ -919,15 +919,29 @@ fn frames_a_node_did_not_declare_are_dropped_and_counted() {
     assert_eq!(bus.stats().snapshot().tx_undeclared, 1);
 }
 
-/// Declares slot 1 of 0x200 (as an M3508 with ESC id 2), then also writes another motor's
-/// slot and a slot on a C620's feedback ID; remembers what `write_slot` answered.
+/// Declares `declared` (or no slot), then writes slot 1 of 0x200, another motor's slot 0 of
+/// 0x200 and slots 0 and 1 on a C620's feedback ID 0x201; remembers what `write_slot`
+/// answered.
 struct SlotStray {
-    answers: std::sync::Mutex<[bool; 3]>,
+    declared: Option<CommandSlot>,
+    answers: std::sync::Mutex<[bool; 4]>,
+}
+
+impl SlotStray {
+    fn new(declared: Option<CommandSlot>) -> Self {
+        Self {
+            declared,
+            answers: std::sync::Mutex::new([false; 4]),
+        }
+    }
 }
 
 impl CanNode for SlotStray {
     fn bus_usage(&self) -> BusUsage {
-        BusUsage::NONE.with_slot(CommandSlot::new(0x200, 1).unwrap())
+        match self.declared {
+            Some(slot) => BusUsage::NONE.with_slot(slot),
+            None => BusUsage::NONE,
+        }
     }
     fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
         Ok(())
@@ -938,6 +952,7 @@ impl CanNode for SlotStray {
             out.write_slot(CommandSlot::new(0x200, 1).unwrap(), 0x0102),
             out.write_slot(CommandSlot::new(0x200, 0).unwrap(), 1234),
             out.write_slot(CommandSlot::new(0x201, 0).unwrap(), 1),
+            out.write_slot(CommandSlot::new(0x201, 1).unwrap(), 2),
         ];
     }
 }
@@ -945,24 +960,35 @@ impl CanNode for SlotStray {
 #[test]
 fn a_node_writes_only_the_slot_it_declared() {
     let wheel = DjiMotor::m3508(1).unwrap(); // slot 0 of 0x200; offline, so it commands 0
-    let stray = SlotStray {
-        answers: std::sync::Mutex::new([false; 3]),
-    };
+    let stray = SlotStray::new(CommandSlot::new(0x200, 1)); // as an M3508 with ESC id 2
     let mut builder = BusBuilder::<4>::new();
     builder.register(&wheel).unwrap();
     builder.register(&stray).unwrap();
     let bus = builder.build();
     let mut batch = TxBatch::new();
     bus.tick(T0, 0.001, &mut batch);
-    assert_eq!(*stray.answers.lock().unwrap(), [true, false, false]);
+    assert_eq!(*stray.answers.lock().unwrap(), [true, false, false, false]);
     // One frame: the wheel's own 0 in slot 0 (not the stray's 1234 = 0x04D2), the stray's
     // declared slot 1; nothing on the feedback ID 0x201.
     assert_eq!(batch.frames().len(), 1);
     assert_eq!(batch.frames()[0].raw_id(), 0x200);
     assert_eq!(batch.frames()[0].data(), &[0, 0, 1, 2, 0, 0, 0, 0]);
-    assert_eq!(bus.stats().snapshot().tx_undeclared, 2);
+    assert_eq!(bus.stats().snapshot().tx_undeclared, 3);
     // Outside a tick the batch takes any slot again.
     assert!(batch.write_slot(CommandSlot::new(0x1FF, 3).unwrap(), 7));
+}
+
+#[test]
+fn a_node_that_declared_no_slot_writes_none() {
+    let stray = SlotStray::new(None);
+    let mut builder = BusBuilder::<4>::new();
+    builder.register(&stray).unwrap();
+    let bus = builder.build();
+    let mut batch = TxBatch::new();
+    bus.tick(T0, 0.001, &mut batch);
+    assert_eq!(*stray.answers.lock().unwrap(), [false; 4]);
+    assert!(batch.frames().is_empty());
+    assert_eq!(bus.stats().snapshot().tx_undeclared, 4);
 }
 
 #[test]
