@@ -285,26 +285,47 @@ pub fn write_svg(scenario: &Scenario, result: &RunResult, path: &Path) -> io::Re
     root.fill(&WHITE).map_err(plot_err)?;
     let (top, bottom) = root.split_vertically(400);
     let t_end = scenario.duration_ms as f64 * 1e-3;
-    let angle = scenario
-        .targets
-        .iter()
-        .any(|t| matches!(t.kind, TargetKind::AngleDeg | TargetKind::TotalAngleDeg));
-    let response = |m: &crate::scenario::MotorSample| {
-        if angle { m.true_total_deg } else { m.true_rpm }
+    // Each motor in its own unit: degrees if its target is an angle, else rpm (a current
+    // target is in amps: only the speed it gives is drawn).
+    let kind_of = |i: usize| {
+        scenario
+            .targets
+            .iter()
+            .find(|t| t.motor == i)
+            .map(|t| t.kind)
     };
+    let is_angle = |i: usize| {
+        matches!(
+            kind_of(i),
+            Some(TargetKind::AngleDeg | TargetKind::TotalAngleDeg)
+        )
+    };
+    let angle_motors = (0..scenario.motors.len()).filter(|&i| is_angle(i)).count();
+    let (angle, mixed) = (
+        angle_motors > 0,
+        angle_motors % scenario.motors.len().max(1) != 0,
+    );
     let series: Vec<Vec<Point>> = (0..scenario.motors.len())
         .map(|i| {
+            let response = |m: &crate::scenario::MotorSample| {
+                if is_angle(i) {
+                    m.true_total_deg
+                } else {
+                    m.true_rpm
+                }
+            };
             result
                 .samples
                 .iter()
                 .filter_map(|s| {
                     s.motors.get(i).map(|m| {
-                        let target = match scenario.targets.iter().find(|t| t.motor == i) {
-                            Some(t) if t.kind == TargetKind::AngleDeg => {
+                        let target = match kind_of(i) {
+                            Some(TargetKind::AngleDeg) => {
                                 // Show the angle target where the motor is headed.
                                 let y = response(m);
                                 y + f64::from(rc10_core::math::wrap_deg_180(m.target - y as f32))
                             }
+                            Some(TargetKind::Current) => f64::NAN,
                             _ => f64::from(m.target),
                         };
                         Point {
@@ -334,7 +355,9 @@ pub fn write_svg(scenario: &Scenario, result: &RunResult, path: &Path) -> io::Re
     chart
         .configure_mesh()
         .x_desc("time (s)")
-        .y_desc(if angle {
+        .y_desc(if mixed {
+            "output speed (rpm) or angle (deg), per motor"
+        } else if angle {
             "output angle (deg)"
         } else {
             "output speed (rpm)"
@@ -344,19 +367,26 @@ pub fn write_svg(scenario: &Scenario, result: &RunResult, path: &Path) -> io::Re
     for (i, (s, &color)) in series.iter().zip(COLORS.iter().cycle()).enumerate() {
         chart
             .draw_series(DashedLineSeries::new(
-                s.iter().map(|p| (p.t_s, p.target)),
+                s.iter()
+                    .filter(|p| p.target.is_finite())
+                    .map(|p| (p.t_s, p.target)),
                 6,
                 4,
                 color.mix(0.6).stroke_width(1),
             ))
             .map_err(plot_err)?;
+        let unit = match (mixed, is_angle(i)) {
+            (false, _) => "",
+            (true, true) => " (deg)",
+            (true, false) => " (rpm)",
+        };
         chart
             .draw_series(LineSeries::new(
                 s.iter().map(|p| (p.t_s, p.response)),
                 color.stroke_width(2),
             ))
             .map_err(plot_err)?
-            .label(format!("motor {}", i + 1))
+            .label(format!("motor {}{unit}", i + 1))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color));
     }
     chart
@@ -497,8 +527,9 @@ pub fn write_all(
 
 #[cfg(test)]
 mod tests {
-    use super::{push_digits, push_fixed};
+    use super::{push_digits, push_fixed, write_svg};
     use crate::scenario::run::uniform;
+    use crate::scenario::{TargetKind, TargetSpec, builtin, run};
     use rand_xoshiro::Xoshiro256PlusPlus;
     use rand_xoshiro::rand_core::SeedableRng;
 
@@ -607,5 +638,35 @@ mod tests {
             push_fixed(&mut fast, f64::from(x), 4);
             assert_eq!(fast, format!("{x:.4}").as_bytes());
         }
+    }
+
+    #[test]
+    fn a_plot_of_angle_and_speed_motors_names_each_ones_unit() {
+        let mut s = builtin()
+            .into_iter()
+            .find(|s| s.name == "fault-power-cut")
+            .unwrap();
+        s.faults.clear();
+        s.duration_ms = 50;
+        s.targets = vec![
+            TargetSpec {
+                motor: 0,
+                kind: TargetKind::AngleDeg,
+                steps: vec![(0, 90.0)],
+            },
+            TargetSpec {
+                motor: 1,
+                kind: TargetKind::Rpm,
+                steps: vec![(0, 100.0)],
+            },
+        ];
+        let r = run(&s).unwrap();
+        let path = std::env::temp_dir().join(format!("rc10-mixed-{}.svg", std::process::id()));
+        write_svg(&s, &r, &path).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert!(svg.contains("motor 1 (deg)"), "no degree label");
+        assert!(svg.contains("motor 2 (rpm)"), "no rpm label");
+        assert!(svg.contains("per motor"), "axis not marked as per motor");
     }
 }
