@@ -686,6 +686,11 @@ mod tests {
         steps = [[0, 100.0]]
     "#;
 
+    /// The minimal file with one `[[fault]]` table of these lines.
+    fn with_fault(lines: &str) -> String {
+        format!("{MINIMAL}\n[[fault]]\n{lines}\n")
+    }
+
     #[test]
     fn minimal_file_parses_with_defaults() {
         let s = parse(MINIMAL).unwrap();
@@ -782,17 +787,15 @@ mod tests {
             parse(&bad_gain).unwrap_err(),
             FileError::Invalid { field, .. } if field == "motor[1].speed_pid"
         ));
-        let bad_fault = format!(
-            "{MINIMAL}\n[[fault]]\nkind = \"frame_loss\"\nprobability = 1.5\nfrom_ms = 0\nto_ms = 10\n"
-        );
+        let bad_fault =
+            with_fault("kind = \"frame_loss\"\nprobability = 1.5\nfrom_ms = 0\nto_ms = 10");
         assert!(matches!(
             parse(&bad_fault).unwrap_err(),
             FileError::Invalid { field, .. } if field == "fault[1].probability"
         ));
         // TOML has `nan` and `inf`: a NaN temperature or torque would fill the trace with NaN.
-        let nan_heat = format!(
-            "{MINIMAL}\n[[fault]]\nkind = \"over_temperature\"\nmotor = 1\nat_ms = 5\ncelsius = nan\n"
-        );
+        let nan_heat =
+            with_fault("kind = \"over_temperature\"\nmotor = 1\nat_ms = 5\ncelsius = nan");
         assert!(matches!(
             parse(&nan_heat).unwrap_err(),
             FileError::Invalid { field, .. } if field.starts_with("fault[1]")
@@ -806,8 +809,8 @@ mod tests {
             FileError::Invalid { field, .. } if field == "motor[1].load"
         ));
         // A delay past every clock (it wrapped to the past) and a run too long to time in µs.
-        let huge_delay = format!(
-            "{MINIMAL}\n[[fault]]\nkind = \"delay\"\ndelay_us = 18446744073709551615\nfrom_ms = 0\nto_ms = 10\n"
+        let huge_delay = with_fault(
+            "kind = \"delay\"\ndelay_us = 18446744073709551615\nfrom_ms = 0\nto_ms = 10",
         );
         assert!(matches!(
             parse(&huge_delay).unwrap_err(),

@@ -83,9 +83,8 @@ pub(crate) struct StepAccumulator {
     t10: Option<f64>,
     t90: Option<f64>,
     overshoot_percent: f64,
-    /// Whether some sample (the last one: `last_outside`) was outside the band, and the
-    /// settling time the first sample after the last one outside gave.
-    any_outside: bool,
+    /// Whether the last sample was outside the band, and the settling time so far: 0 until a
+    /// sample is outside, none while outside, then from the first sample after it.
     last_outside: bool,
     settling_time_s: Option<f64>,
     tail_sum: f64,
@@ -112,9 +111,8 @@ impl StepAccumulator {
             t10: None,
             t90: None,
             overshoot_percent: 0.0,
-            any_outside: false,
             last_outside: false,
-            settling_time_s: None,
+            settling_time_s: Some(0.0),
             // `Sum` for floats starts at −0.0.
             tail_sum: -0.0,
             previous: None,
@@ -138,7 +136,6 @@ impl StepAccumulator {
         let error = (value - self.target).abs();
         let outside = error > self.band;
         if outside {
-            self.any_outside = true;
             self.settling_time_s = None;
         } else if self.last_outside {
             self.settling_time_s = Some(t_s - self.t0_s);
@@ -166,11 +163,7 @@ impl StepAccumulator {
                 _ => None,
             },
             overshoot_percent: self.overshoot_percent,
-            settling_time_s: if self.any_outside {
-                self.settling_time_s
-            } else {
-                Some(0.0)
-            },
+            settling_time_s: self.settling_time_s,
             steady_state_error: if tail_len == 0 {
                 f64::NAN
             } else {

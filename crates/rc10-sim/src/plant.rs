@@ -489,9 +489,7 @@ impl DjiEsc {
             Some((t, torque)) if now_us >= t => torque,
             _ => self.load.torque_nm,
         };
-        let off = !self.powered
-            || p.over_temperature_cut_c
-                .is_some_and(|cut| self.temperature > cut);
+        let off = !self.powered || self.over_temperature();
         let current = if off {
             0.0
         } else {
