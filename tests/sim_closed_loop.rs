@@ -286,19 +286,40 @@ fn delayed_feedback_still_controls_within_targets() {
 }
 
 #[test]
-fn stalled_receiver_overflows_the_three_deep_rx_fifo_and_counts_it() {
+fn stalled_receiver_overflows_the_three_deep_rx_fifos_and_reports_it_once() {
     use rc10_sim::scenario::Fault;
-    // Two motors = two feedback frames per ms; a 5 ms stall brings ~10 frames: 3 fit.
+    // Two motors, one in each RX FIFO: a 5 ms stall brings each FIFO 5 frames, 3 fit, 2 are
+    // lost. The receiver, running again, reports one overrun for them all.
     let mut s = scenario("fault-power-cut");
     s.faults = vec![Fault::RxStall {
         from_ms: 200,
         to_ms: 205,
     }];
     let r = run(&s).unwrap();
-    assert!((6..=8).contains(&r.rx_overruns), "{}", r.rx_overruns);
-    assert_eq!(u64::from(r.counters.rx_overruns), r.rx_overruns);
+    assert_eq!(r.rx_overruns, 4);
+    assert_eq!(r.counters.rx_overruns, 1);
     // A 5 ms gap is far below the offline timeout: nobody went offline.
     assert_eq!(r.offline_events, vec![0, 0]);
+    // Two stalls that each lose frames are two overruns; a stall too short to fill a FIFO
+    // (1 ms: one frame each) is none.
+    s.faults = vec![
+        Fault::RxStall {
+            from_ms: 200,
+            to_ms: 205,
+        },
+        Fault::RxStall {
+            from_ms: 250,
+            to_ms: 251,
+        },
+        Fault::RxStall {
+            from_ms: 260,
+            to_ms: 270,
+        },
+    ];
+    let r = run(&s).unwrap();
+    assert_eq!(r.counters.rx_overruns, 2);
+    // 2 + 2 lost in the first stall, 7 + 7 in the third (10 frames a FIFO, 3 kept).
+    assert_eq!(r.rx_overruns, 18);
 }
 
 #[test]

@@ -53,8 +53,9 @@ pub enum Fault {
         to_ms: u64,
     },
     /// The controller's receive path (its RX interrupt) is blocked in `[from_ms, to_ms)`:
-    /// frames wait in the 3-deep RX FIFO, later ones are dropped and reported to rc10 as
-    /// overruns, and the FIFO drains when the stall ends.
+    /// frames wait in the two 3-deep RX FIFOs (each motor's feedback in the FIFO rc10's
+    /// filter plan gives it), later ones are dropped, and when the stall ends the receiver
+    /// reports one overrun to rc10 if any were dropped, then reads FIFO 0, then FIFO 1.
     RxStall {
         /// Start, ms.
         from_ms: u64,

@@ -17,6 +17,7 @@ mod faults;
 mod metrics;
 mod observe;
 pub(crate) mod run;
+mod rx;
 pub mod soak;
 
 pub use builtin::builtin;
@@ -30,6 +31,7 @@ use crate::bus::{SimBusStats, TxOrder};
 use crate::plant::Load;
 use rc10_core::bus::{BusConfig, FrameBudget, RegisterError};
 use rc10_core::can::BusCounters;
+use rc10_core::can::acceptance::PlanError;
 use rc10_core::motor::dji::{DjiConfig, DjiModel};
 use std::fmt;
 
@@ -135,6 +137,9 @@ pub enum SimError {
         /// What is wrong.
         reason: String,
     },
+    /// The motors' feedback IDs need more acceptance-filter elements than an STM32G4's
+    /// FDCAN has (rc10-stm32's `start_can` would refuse the bus).
+    Filters(PlanError),
 }
 
 impl fmt::Display for SimError {
@@ -145,6 +150,7 @@ impl fmt::Display for SimError {
                 write!(f, "motor {motor} cannot be registered: {error}")
             }
             Self::Target { target, reason } => write!(f, "target {target}: {reason}"),
+            Self::Filters(error) => write!(f, "the motors do not fit the FDCAN's filters: {error}"),
         }
     }
 }
@@ -206,7 +212,8 @@ pub struct RunResult {
     pub budget: FrameBudget,
     /// Offline events per motor, as rc10 counted them.
     pub offline_events: Vec<u32>,
-    /// Frames dropped because the controller's RX FIFO was full.
+    /// Frames lost because their RX FIFO was full (rc10's own `rx_overruns` counts the
+    /// overruns its receiver reported: one per stall that lost frames, however many).
     pub rx_overruns: u64,
     /// Step metrics per stepped target.
     pub metrics: Vec<TargetMetrics>,

@@ -35,8 +35,11 @@ pub enum RxDrop {
     BusOff,
     /// The controller was cut off from the other nodes (no acknowledgement).
     NoAck,
-    /// The receive path was stalled and the 3-deep RX FIFO was full (an overrun).
+    /// The receive path was stalled and the frame's 3-deep RX FIFO was full (an overrun).
     Overrun,
+    /// No acceptance filter passes its ID: the controller's hardware discarded it (rc10
+    /// never hears of it, as on a board).
+    Filtered,
 }
 
 /// One scheduler tick, after rc10's `tick` and `transmit`.
@@ -74,6 +77,10 @@ pub trait RunObserver {
 
     /// A frame on its way to the controller was dropped before rc10 saw it.
     fn on_rx_dropped(&mut self, _t_us: u64, _frame: &CanFrame, _why: RxDrop) {}
+
+    /// The receive path ran again after a stall in which its FIFOs lost frames, and reported
+    /// one overrun to rc10 (`Bus::record_receive_error`) at `t_us`.
+    fn on_overrun_reported(&mut self, _t_us: u64) {}
 
     /// A scheduler tick ran.
     fn on_tick(&mut self, _tick: &TickEvent<'_>) {}

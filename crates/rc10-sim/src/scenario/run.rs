@@ -6,6 +6,7 @@ use super::faults::{
 };
 use super::metrics::target_metrics;
 use super::observe::{NoObserver, RunObserver, RxDrop, TickEvent, WireEvent};
+use super::rx::{RxPath, Stored};
 use super::{
     Controller, MAX_MOTORS, MotorSample, MotorSpec, RunResult, Sample, Scenario, SimError,
     TargetKind,
@@ -67,8 +68,6 @@ pub(crate) fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
 }
 
 const PLANT_STEP_US: u64 = 200;
-/// RX FIFO depth of an STM32G4 FDCAN (each of its two FIFOs holds 3 frames).
-const RX_FIFO_DEPTH: usize = 3;
 pub(super) const TICK_US: u64 = 1000;
 
 /// The simulated bus for `scenario`: its bitrate and TX order, the STM32G4's buffer depths.
@@ -128,6 +127,8 @@ pub fn run_observed(
             .map_err(|error| SimError::Register { motor: i, error })?;
     }
     let rc10 = builder.build();
+    let mut rx =
+        RxPath::new(rc10.nodes().iter().map(|node| node.bus_usage())).map_err(SimError::Filters)?;
     for (i, t) in scenario.targets.iter().enumerate() {
         if t.motor >= motors.len() {
             return Err(SimError::Target {
@@ -165,8 +166,6 @@ pub fn run_observed(
     let mut next_step = vec![0usize; scenario.targets.len()];
     // Frames on their way to the controller under a delay fault: (arrival µs, frame).
     let mut delayed: std::collections::VecDeque<(u64, CanFrame)> = Default::default();
-    // The controller's RX FIFO while its receive path is stalled.
-    let mut rx_fifo: std::collections::VecDeque<CanFrame> = Default::default();
     let mut rx_overruns = 0u64;
 
     // The earliest of `next_feedback`, kept up to date when a feedback time moves.
@@ -206,12 +205,11 @@ pub fn run_observed(
                     observer.on_rx_dropped(t, &frame, RxDrop::BusOff);
                 } else if bus.mcu_no_ack() {
                     observer.on_rx_dropped(t, &frame, RxDrop::NoAck);
+                } else if !rx.accepts(&frame) {
+                    observer.on_rx_dropped(t, &frame, RxDrop::Filtered);
                 } else if rx_stalled(scenario, t_ms) {
-                    if rx_fifo.len() < RX_FIFO_DEPTH {
-                        rx_fifo.push_back(frame);
-                    } else {
+                    if rx.store(frame) == Stored::Lost {
                         rx_overruns += 1;
-                        rc10.record_receive_error(ReceiveError::Overrun);
                         observer.on_rx_dropped(t, &frame, RxDrop::Overrun);
                     }
                 } else {
@@ -232,9 +230,16 @@ pub fn run_observed(
                 }
             }
         }
-        if !rx_stalled(scenario, t_ms) {
-            // The receive path runs again: the FIFO drains now, in order.
-            while let Some(frame) = rx_fifo.pop_front() {
+        if !rx_stalled(scenario, t_ms)
+            && let Some(drained) = rx.drain()
+        {
+            // The receive path runs again: the receiver reports an overrun once if either
+            // FIFO lost frames, then reads what the FIFOs kept.
+            if drained.overrun {
+                rc10.record_receive_error(ReceiveError::Overrun);
+                observer.on_overrun_reported(t);
+            }
+            for frame in drained.frames {
                 let r = rc10.dispatch(&frame, Instant::from_micros(t));
                 observer.on_dispatch(t, &frame, r);
             }

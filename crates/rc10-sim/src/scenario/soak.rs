@@ -35,7 +35,8 @@
 //! 7. **statistics**: rc10's counters equal the simulator's ground truth for every fault
 //!    class injected (corrupted frames → `rx_rejected`; bus-off → `bus_off_events`,
 //!    `tx_bus_off`; no acknowledgement → `tx_full`, `tx_stale`, `bus_errors`; RX stall →
-//!    `rx_overruns`; lost frames → frames received, feedback gaps, and each motor's offline
+//!    `rx_overruns`, one per stall that lost frames, as the receiver reports them; no
+//!    feedback discarded by the acceptance filters; lost frames → frames received, feedback gaps, and each motor's offline
 //!    events equal to the outages the fault windows imply).
 
 use super::observe::{RunObserver, RxDrop, TickEvent, WireEvent};
@@ -456,8 +457,12 @@ pub struct GroundTruth {
     pub dropped_bus_off: u64,
     /// Device frames the controller never heard because it was cut off (no ACK).
     pub dropped_no_ack: u64,
-    /// Device frames dropped because the RX FIFO was full.
+    /// Device frames dropped because their RX FIFO was full.
     pub overruns: u64,
+    /// Overruns the receive path reported to rc10 (one per stall that lost frames).
+    pub overrun_reports: u64,
+    /// Device frames the controller's acceptance filters discarded.
+    pub filtered: u64,
     /// Entries into bus-off seen at ticks.
     pub bus_off_entries: u64,
     /// Frames the controller's port refused as bus-off.
@@ -741,6 +746,7 @@ impl RunObserver for SoakObserver {
             RxDrop::BusOff => t.dropped_bus_off += 1,
             RxDrop::NoAck => t.dropped_no_ack += 1,
             RxDrop::Overrun => t.overruns += 1,
+            RxDrop::Filtered => t.filtered += 1,
         }
         if let Some(n) = self.corrupted_in_flight.get_mut(frame) {
             *n -= 1;
@@ -748,6 +754,10 @@ impl RunObserver for SoakObserver {
                 self.corrupted_in_flight.remove(frame);
             }
         }
+    }
+
+    fn on_overrun_reported(&mut self, _t_us: u64) {
+        self.record.truth.overrun_reports += 1;
     }
 
     fn on_tick(&mut self, tick: &TickEvent<'_>) {
@@ -1604,9 +1614,9 @@ fn statistics(scenario: &Scenario, record: &SoakRecord, limits: &[MotorLimits]) 
         ),
         stat_line(
             &mut ok,
-            "RX stall -> rx_overruns",
+            "RX stall -> rx_overruns (stalls that lost frames)",
             c.rx_overruns.into(),
-            t.overruns,
+            t.overrun_reports,
             rx_stall,
         ),
         stat_line(
@@ -1634,9 +1644,21 @@ fn statistics(scenario: &Scenario, record: &SoakRecord, limits: &[MotorLimits]) 
     ));
     let mut line = format!(
         "lost frames: {} removed from the wire ({} of them feedback), {} corrupted, {} device \
-         frames unheard while bus-off, {} while unacknowledged",
-        t.lost, t.lost_device_frames, t.corrupted, t.dropped_bus_off, t.dropped_no_ack
+         frames unheard while bus-off, {} while unacknowledged, {} in full RX FIFOs, {} \
+         discarded by the acceptance filters",
+        t.lost,
+        t.lost_device_frames,
+        t.corrupted,
+        t.dropped_bus_off,
+        t.dropped_no_ack,
+        t.overruns,
+        t.filtered
     );
+    if t.filtered > 0 {
+        // Every device is a registered motor: its feedback must pass the filters.
+        ok = false;
+        line.push_str(": FAIL, feedback discarded by the filters");
+    }
     if loss && t.lost == 0 {
         ok = false;
         line.push_str(": FAIL, loss injected but no frame lost");
@@ -2161,7 +2183,8 @@ mod tests {
 
     #[test]
     fn a_fault_class_miscounted_fails_the_statistics_check() {
-        let cases: [fn(&mut SoakRecord); 11] = [
+        let cases: [fn(&mut SoakRecord); 12] = [
+            |r| r.truth.filtered = 1,
             |r| r.counters.rx_rejected += 1,
             |r| r.counters.bus_off_events += 1,
             |r| r.counters.tx_bus_off -= 1,
@@ -2180,7 +2203,7 @@ mod tests {
         // Injected but counted by neither side is still a failure.
         let neither = failed_after(|r| {
             r.counters.rx_overruns = 0;
-            r.truth.overruns = 0;
+            r.truth.overrun_reports = 0;
         });
         assert_eq!(neither, vec![CheckId::Statistics]);
     }
