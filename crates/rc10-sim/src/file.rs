@@ -28,7 +28,9 @@
 //! to_ms = 500
 //! ```
 //!
-//! A mecanum chassis driven by a DR16 remote (motors 1–4 are FL, FR, RL, RR):
+//! A mecanum chassis driven by a DR16 remote (motors 1–4 are FL, FR, RL, RR; the chassis sets
+//! their speeds, so `[[target]]`s are for the other motors only, and a run refuses one on a
+//! wheel):
 //!
 //! ```toml
 //! [chassis]

@@ -51,9 +51,12 @@ pub(super) struct ChassisApp {
 /// DR16 frame period.
 const DBUS_PERIOD_MS: u64 = 14;
 
+/// The motors a chassis drives: the first four (FL, FR, RL, RR).
+pub(super) const CHASSIS_WHEELS: usize = 4;
+
 impl ChassisApp {
     pub(super) fn new(drive: &ChassisDrive, motor_count: usize) -> Result<Self, SimError> {
-        if motor_count < 4 {
+        if motor_count < CHASSIS_WHEELS {
             return Err(SimError::InvalidMotor {
                 motor: motor_count,
                 reason: "a chassis needs motors 1-4 (FL, FR, RL, RR)".into(),

@@ -1,6 +1,6 @@
 //! The world loop: virtual time from event to event, frames delivered between bus, ESCs and rc10.
 
-use super::chassis_app::ChassisApp;
+use super::chassis_app::{CHASSIS_WHEELS, ChassisApp};
 use super::faults::{
     Fault, apply_state_faults, delay_us, in_window, rx_stalled, scheduler_stall_end,
 };
@@ -130,12 +130,17 @@ pub fn run_observed(
     let mut rx =
         RxPath::new(rc10.nodes().iter().map(|node| node.bus_usage())).map_err(SimError::Filters)?;
     for (i, t) in scenario.targets.iter().enumerate() {
-        if t.motor >= motors.len() {
-            return Err(SimError::Target {
-                target: i,
-                reason: format!("no motor {}", t.motor),
-            });
-        }
+        let reason = if t.motor >= motors.len() {
+            format!("no motor {}", t.motor)
+        } else if scenario.chassis.is_some() && t.motor < CHASSIS_WHEELS {
+            format!(
+                "motor {} is a chassis wheel: the chassis sets its speed every tick",
+                t.motor + 1
+            )
+        } else {
+            continue;
+        };
+        return Err(SimError::Target { target: i, reason });
     }
 
     let mut bus = SimBus::new(sim_bus_config(scenario));
@@ -430,6 +435,31 @@ mod tests {
     use super::*;
     use crate::bus::TxOrder;
     use crate::scenario::builtin;
+
+    #[test]
+    fn a_target_on_a_chassis_wheel_is_refused() {
+        use crate::scenario::{TargetKind, TargetSpec};
+        let mut s = builtin()
+            .into_iter()
+            .find(|s| s.name == "chassis-remote-drive")
+            .unwrap();
+        s.duration_ms = 10;
+        s.targets = vec![TargetSpec {
+            motor: 3,
+            kind: TargetKind::Rpm,
+            steps: vec![(0, 100.0)],
+        }];
+        // The chassis would overwrite it at every tick: the run says so instead.
+        match run(&s) {
+            Err(SimError::Target { target: 0, reason }) => {
+                assert!(reason.contains("motor 4 is a chassis wheel"), "{reason}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // Without the chassis the same target drives the wheel.
+        s.chassis = None;
+        assert!(run(&s).is_ok());
+    }
 
     #[test]
     fn scenario_bitrate_and_tx_order_reach_the_simulated_bus() {
