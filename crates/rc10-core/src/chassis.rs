@@ -217,6 +217,27 @@ impl<const N: usize> LinearChassis<N> {
         })
     }
 
+    /// The same chassis with these per-wheel signs (+1, or −1 for a motor mounted the other
+    /// way round), for the solvers that build their rows themselves ([`omni`]; mecanum
+    /// takes them in [`MecanumConfig::with_wheel_signs`]). Anything but ±1 is
+    /// [`ChassisError::InvalidSign`].
+    ///
+    /// ```
+    /// use core::f32::consts::FRAC_PI_2;
+    /// use rc10_core::chassis::{omni, Twist};
+    /// let plain = omni::<3>(0.2, 0.05, FRAC_PI_2).unwrap();
+    /// let mirrored = plain.with_wheel_signs([1.0, -1.0, 1.0]).unwrap();
+    /// let (a, b) = (plain.wheel_rpm(Twist::new(1.0, 0.0, 0.0)), mirrored.wheel_rpm(Twist::new(1.0, 0.0, 0.0)));
+    /// assert_eq!((b[0], b[1], b[2]), (a[0], -a[1], a[2]));
+    /// ```
+    pub fn with_wheel_signs(mut self, signs: [f32; N]) -> Result<Self, ChassisError> {
+        if signs.iter().any(|&s| s != 1.0 && s != -1.0) {
+            return Err(ChassisError::InvalidSign);
+        }
+        self.signs = signs;
+        Ok(self)
+    }
+
     /// Output-shaft rpm of every wheel for `twist`. A non-finite twist, or one so large that
     /// a wheel's rpm overflows `f32`, gives all zeros.
     #[allow(
@@ -454,6 +475,13 @@ impl Swerve {
 /// which the command moves is kept (a diagonal push stays diagonal instead of sliding along
 /// whichever axis saturates first).
 ///
+/// Limit the command in the frame it is given in. For a chassis that spins while it drives
+/// field-relative (小陀螺), that is the world frame: limit the world-frame twist, then
+/// [`Twist::world_to_robot`] it. Limited after the rotation, the robot-frame target turns
+/// with the chassis (at 2 m/s and 10 rad/s it changes by 20 m/s² without anyone touching
+/// the sticks), and a 2 m/s² limit shrinks the drive to a fraction of what was asked. As the
+/// change is scaled as a whole, a change in ω also slows the linear axes while it lasts.
+///
 /// ```
 /// use rc10_core::chassis::{Twist, TwistLimiter};
 /// // 2 m/s² on each linear axis, 6 rad/s² in rotation.
@@ -555,7 +583,7 @@ pub fn clamp_twist(twist: Twist, max: Twist) -> Twist {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::f32::consts::FRAC_PI_2;
+    use core::f32::consts::{FRAC_PI_2, FRAC_PI_4};
     use proptest::prelude::*;
 
     fn rm_chassis() -> LinearChassis<4> {
@@ -609,7 +637,29 @@ mod tests {
     }
 
     #[test]
-    fn omni3_forward_uses_front_wheels_only() {
+    fn omni_wheel_signs_flip_their_motors_and_odometry_undoes_them() {
+        let c = omni::<4>(0.25, 0.05, FRAC_PI_4)
+            .unwrap()
+            .with_wheel_signs([1.0, 1.0, -1.0, -1.0])
+            .unwrap();
+        // Spinning at 1 rad/s: every rim at R·ω = 0.25 m/s, 47.75 rpm; wheels 3 and 4 turn
+        // their motors the other way.
+        let w = c.wheel_rpm(Twist::new(0.0, 0.0, 1.0));
+        for (got, want) in w.iter().zip([47.75, 47.75, -47.75, -47.75]) {
+            assert!((got - want).abs() < 0.01, "{w:?}");
+        }
+        let back = c.twist(&w);
+        assert!((back.omega_rad_s - 1.0).abs() < 1e-4 && back.vx_m_s.abs() < 1e-4);
+        assert_eq!(
+            omni::<4>(0.25, 0.05, 0.0)
+                .unwrap()
+                .with_wheel_signs([1.0, 0.5, 1.0, 1.0]),
+            Err(ChassisError::InvalidSign)
+        );
+    }
+
+    #[test]
+    fn omni3_forward_drives_all_three_wheels() {
         // Wheels at 90°, 210°, 330°: the wheel at 90° (left side) drives along −x.
         let c = omni::<3>(0.2, 0.05, FRAC_PI_2).unwrap();
         let w = c.wheel_rpm(Twist::new(1.0, 0.0, 0.0));

@@ -146,7 +146,13 @@ impl Ramp {
         if !target.is_finite() || !dt_s.is_finite() || dt_s < 0.0 {
             return self.output;
         }
-        let max_step = self.rate_per_s * dt_s; // may be inf for an infinite rate
+        // An infinite rate passes the target through, even for a `dt_s` of 0 (∞·0 is NaN,
+        // which `ramp` would read as no step at all).
+        let max_step = if self.rate_per_s == f32::INFINITY {
+            f32::INFINITY
+        } else {
+            self.rate_per_s * dt_s
+        };
         self.output = crate::math::ramp(self.output, target, max_step);
         self.output
     }
@@ -226,6 +232,8 @@ mod tests {
     fn ramp_infinite_rate_jumps_and_nan_rate_freezes() {
         let mut fast = Ramp::new(f32::INFINITY, 0.0);
         assert_eq!(fast.update(42.0, 0.001), 42.0);
+        // Also with no time passed (∞·0 would be no step).
+        assert_eq!(fast.update(-7.0, 0.0), -7.0);
         let mut frozen = Ramp::new(f32::NAN, 1.0);
         assert_eq!(frozen.update(42.0, 0.001), 1.0);
     }

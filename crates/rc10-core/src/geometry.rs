@@ -181,10 +181,17 @@ impl Transform3D {
         ))
     }
 
-    /// The pose this transform places its frame at (ZYX angles; pitch in `[-π/2, π/2]`).
+    /// The pose this transform places its frame at (ZYX angles in radians; pitch in
+    /// `[-π/2, π/2]`, roll and yaw in `[-π, π]`).
+    ///
+    /// At pitch ±π/2 (a camera looking straight down, say) only roll − yaw (at +π/2) or
+    /// roll + yaw (at −π/2) is defined: the pose then has yaw 0 and carries the whole turn
+    /// in roll, and rebuilds the same rotation. Within about 3·10⁻⁴ rad of ±π/2 it is put
+    /// there too: the rotation it rebuilds differs from this one by less than 10⁻³ (f32
+    /// rounding leaves nothing sharper to read there).
     pub fn to_pose(&self) -> Pose3D {
         let t = self.0.translation.vector;
-        let (roll, pitch, yaw) = self.0.rotation.euler_angles();
+        let (roll, pitch, yaw) = zyx_angles(self.0.rotation.to_rotation_matrix().matrix());
         Pose3D::new(t.x, t.y, t.z, roll, pitch, yaw)
     }
 
@@ -233,6 +240,33 @@ impl Mul for Transform3D {
     }
 }
 
+/// Below this `cos(pitch)` the pose is read as gimbal-locked: the roll and yaw terms of the
+/// matrix are f32 rounding (about 10⁻⁷) scaled by `1 / cos(pitch)`, so each reading would
+/// be off by as much as the lock's own approximation (`cos(pitch)`) is.
+const GIMBAL_LOCK_COS: f32 = 3.0e-4;
+
+/// Roll, pitch and yaw (rad) of `m = Rz(yaw)·Ry(pitch)·Rx(roll)`.
+///
+/// nalgebra's `euler_angles` tests for the lock with `|m31| ≥ 1`, which an f32 matrix built
+/// at pitch ±π/2 misses by one rounding step (±0.99999994): it then divided rounding noise
+/// by `cos(pitch)` ≈ 3·10⁻⁴ and read roll and yaw at random.
+fn zyx_angles(m: &Matrix3<f32>) -> (f32, f32, f32) {
+    // |cos(pitch)| from the first column, which holds cos(pitch)·(cos(yaw), sin(yaw)).
+    let cos_pitch = libm::hypotf(m.m11, m.m21);
+    let pitch = libm::atan2f(-m.m31, cos_pitch);
+    if cos_pitch < GIMBAL_LOCK_COS {
+        // m22 = cos(roll ∓ yaw), m23 = −sin(roll ∓ yaw) at pitch ±π/2: with yaw 0, that is
+        // the roll.
+        (libm::atan2f(-m.m23, m.m22), pitch, 0.0)
+    } else {
+        (
+            libm::atan2f(m.m32, m.m33),
+            pitch,
+            libm::atan2f(m.m21, m.m11),
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,6 +303,57 @@ mod tests {
         assert!((b3.yaw_rad - 0.3).abs() < 1e-5);
     }
 
+    /// The largest entry of the difference between two transforms' rotation matrices.
+    fn rotation_gap(a: &Transform3D, b: &Transform3D) -> f32 {
+        let (ma, mb) = (
+            a.0.rotation.to_rotation_matrix(),
+            b.0.rotation.to_rotation_matrix(),
+        );
+        (ma.matrix() - mb.matrix()).amax()
+    }
+
+    #[test]
+    fn a_pose_pitched_straight_up_or_down_rebuilds_its_rotation() {
+        // A camera looking straight down (pitch +90°) with yaw 0.5: it maps +Y to
+        // Rz(0.5)·Ry(90°)·+Y = Rz(0.5)·+Y = (−sin 0.5, cos 0.5, 0).
+        let down = Transform3D::from_pose(Pose3D::new(0.0, 0.0, 0.0, 0.0, FRAC_PI_2, 0.5));
+        let want = Point3::new(-libm::sinf(0.5), libm::cosf(0.5), 0.0);
+        assert!((down.apply(Point3::new(0.0, 1.0, 0.0)) - want).norm() < 1e-6);
+        let pose = down.to_pose();
+        // At +90° only roll − yaw is defined: −0.5, carried in roll.
+        assert!((pose.pitch_rad - FRAC_PI_2).abs() < 1e-3, "{pose:?}");
+        assert!(
+            (pose.roll_rad + 0.5).abs() < 1e-5 && pose.yaw_rad == 0.0,
+            "{pose:?}"
+        );
+        let back = Transform3D::from_pose(pose);
+        assert!((back.apply(Point3::new(0.0, 1.0, 0.0)) - want).norm() < 1e-3);
+
+        // Both locks, at and just off ±90°, with roll and yaw all round: the rotation comes
+        // back within 10⁻³.
+        for p in [
+            FRAC_PI_2,
+            FRAC_PI_2 - 1e-6,
+            FRAC_PI_2 - 1e-4,
+            FRAC_PI_2 - 1e-3,
+        ] {
+            for sign in [1.0, -1.0] {
+                for k in 0..24 {
+                    let roll = -3.0 + k as f32 * 0.25;
+                    let yaw = 2.9 - k as f32 * 0.27;
+                    let t = Transform3D::from_pose(Pose3D::new(1.0, 2.0, 3.0, roll, sign * p, yaw));
+                    let back = Transform3D::from_pose(t.to_pose());
+                    let gap = rotation_gap(&t, &back);
+                    assert!(
+                        gap < 1e-3,
+                        "pitch {}, roll {roll}, yaw {yaw}: {gap}",
+                        sign * p
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn homogeneous_matrix_has_translation_column() {
         let m = Transform2D::from_pose(Pose2D::new(4.0, 5.0, PI)).to_homogeneous();
@@ -296,6 +381,16 @@ mod tests {
             let round = t.compose(&t.inverse()).apply(q);
             prop_assert!((round - q).norm() < 1e-4);
             prop_assert!((t.inverse().apply(t.apply(q)) - q).norm() < 1e-4);
+        }
+
+        #[test]
+        fn to_pose_rebuilds_the_rotation_at_any_pitch(
+            r in -PI..PI, p in -FRAC_PI_2..=FRAC_PI_2, w in -PI..PI,
+        ) {
+            let t = Transform3D::from_pose(Pose3D::new(0.0, 0.0, 0.0, r, p, w));
+            let pose = t.to_pose();
+            prop_assert!((-FRAC_PI_2..=FRAC_PI_2).contains(&pose.pitch_rad));
+            prop_assert!(rotation_gap(&t, &Transform3D::from_pose(pose)) < 1e-3);
         }
 
         #[test]

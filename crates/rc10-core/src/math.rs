@@ -112,8 +112,9 @@ pub fn wrap_positive(value: f32, period: f32) -> f32 {
 #[inline]
 fn wrap_positive_valid_period(value: f32, period: f32) -> f32 {
     let r = value - period * floor(value / period);
-    // Rounding can land exactly on `period` for tiny negative inputs (e.g. -1e-9).
-    if r >= period || r < 0.0 { 0.0 } else { r }
+    // Rounding can land exactly on `period` for tiny negative inputs (e.g. -1e-9); a
+    // negative zero (from -0.0) comes out as +0.0, which prints as 0.
+    if r > 0.0 && r < period { r } else { 0.0 }
 }
 
 /// [`wrap_signed`] for a `period` already checked to be finite and positive (a validated
@@ -233,7 +234,8 @@ pub fn angle_diff_deg(from_deg: f32, to_deg: f32) -> f32 {
 ///
 /// `max_step` is taken by magnitude. Within one step of `target` the result is `target`
 /// exactly (never a rounding short of or past it). A NaN `target` leaves `current`
-/// unchanged; a NaN `current` jumps to `target` (there is nothing to ramp from). See [`crate::filter::Ramp`]
+/// unchanged; a NaN or infinite `current` jumps to `target` (there is nothing to ramp from:
+/// an infinite one would stay infinite, as `∞ − step = ∞`). See [`crate::filter::Ramp`]
 /// for a stateful limiter with a rate in units per second.
 ///
 /// ```
@@ -247,7 +249,7 @@ pub fn ramp(current: f32, target: f32, max_step: f32) -> f32 {
     if target.is_nan() {
         return current;
     }
-    if current.is_nan() {
+    if !current.is_finite() {
         return target;
     }
     let step = if max_step.is_nan() {
@@ -352,6 +354,9 @@ mod tests {
         // Tiny negative: mathematically 360 - 1e-9, not representable: must not return 360.
         let w = wrap_deg_360(-1e-9);
         assert!((0.0..360.0).contains(&w));
+        // -0° is 0°, not a negative zero (which telemetry would print as "-0.00").
+        assert!(wrap_deg_360(-0.0).is_sign_positive());
+        assert!(wrap_positive(-720.0, 360.0).is_sign_positive());
     }
 
     #[test]
@@ -383,6 +388,13 @@ mod tests {
     fn ramp_nan_target_holds_current() {
         assert_eq!(ramp(4.0, f32::NAN, 1.0), 4.0);
         assert_eq!(ramp(f32::NAN, 7.0, 1.0), 7.0);
+    }
+
+    #[test]
+    fn ramp_from_an_infinite_current_jumps_to_the_target() {
+        // ∞ − 1 is ∞: stepping would never leave it.
+        assert_eq!(ramp(f32::INFINITY, 0.0, 1.0), 0.0);
+        assert_eq!(ramp(f32::NEG_INFINITY, -3.0, 1.0), -3.0);
     }
 
     #[test]

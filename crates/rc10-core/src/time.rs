@@ -91,8 +91,10 @@ impl DeltaTime {
     }
 }
 
-/// Converts a microsecond count to seconds. Exact for every count below 2^24 µs (16.7 s);
-/// beyond that the relative error stays below 2^-24.
+/// Converts a microsecond count to seconds, for any count within a relative error of 2^-23
+/// (1.2·10⁻⁷: the f32 nearest 10⁻⁶ is not 10⁻⁶, and the product rounds once more); the
+/// count itself converts exactly below 2^24 µs (16.7 s), and the whole seconds are kept
+/// apart from the fraction, so hours of uptime lose nothing.
 #[inline]
 pub fn micros_to_s(us: u64) -> f32 {
     // Below a second (every control period): one 32-bit conversion, the same value as the
@@ -128,6 +130,19 @@ mod tests {
         dt.update(Instant::from_micros(t0));
         assert_eq!(dt.update(Instant::from_micros(t0 + 1000)), 0.001);
         assert_eq!(dt.update(Instant::from_micros(t0 + 1999)), 0.000999);
+    }
+
+    #[test]
+    fn micros_to_s_is_within_two_roundings_for_any_count() {
+        // 1 µs to 2^40 µs (12.7 days), densely below 2 s, then by a prime stride.
+        let counts = (1..2_000_000u64)
+            .step_by(7)
+            .chain((2_000_000..1u64 << 40).step_by(1_234_567_891));
+        for us in counts {
+            let exact = us as f64 * 1e-6;
+            let err = (f64::from(micros_to_s(us)) - exact).abs() / exact;
+            assert!(err < f64::powi(2.0, -23), "{us} µs: {err:e}");
+        }
     }
 
     #[test]
