@@ -28,7 +28,7 @@ use crate::proto::{self, vesc_packet as vp};
 use rc10_core::bus::{Bus, Dispatch, TickPacer};
 use rc10_core::can::loopback::TxQueue;
 use rc10_core::can::{BusStatus, CanFrame, CanTransmit, ErrorState, ExtendedId, Id, StandardId};
-use rc10_core::motor::dm::{DmSpecial, DmStatus, MitCommand};
+use rc10_core::motor::dm::{self, DmSpecial, DmStatus, MitCommand};
 use rc10_core::motor::{ControlMode, MotorState};
 use rc10_core::node::TxBatch;
 use rc10_core::pid::PidConfig;
@@ -55,6 +55,9 @@ struct Track {
     /// Damiao: special commands asked for and not yet sent, oldest first (one goes out a
     /// tick while online; a kind asked for again keeps its place).
     special: std::collections::VecDeque<DmSpecial>,
+    /// Damiao: ticks in a row it has been offline (auto-enable probes on every
+    /// `PROBE_TICKS`-th).
+    offline_ticks: u32,
 }
 
 impl Track {
@@ -65,6 +68,7 @@ impl Track {
         mit: MitCommand::ZERO_TORQUE,
         ff_nm: 0.0,
         special: std::collections::VecDeque::new(),
+        offline_ticks: 0,
     };
 }
 
@@ -406,17 +410,26 @@ impl<'a> Harness<'a> {
                 MotorRef::Vesc(_, info) => check_vesc(&frames, &info, &state, &self.track[i], i),
                 MotorRef::Dm(d, info) => {
                     // Specials wait while the motor is offline.
+                    let t = &mut self.track[i];
                     let special = if state.online {
-                        self.track[i].special.pop_front()
+                        t.special.pop_front()
                     } else {
                         None
                     };
+                    t.offline_ticks = if state.online {
+                        0
+                    } else {
+                        t.offline_ticks + 1
+                    };
+                    let probe =
+                        !state.online && t.offline_ticks % u32::from(dm::PROBE_TICKS) == 0;
                     check_dm(
                         &frames,
                         &info,
                         &state,
                         d.status(),
                         special,
+                        probe,
                         &self.track[i],
                         i,
                     );
@@ -697,6 +710,7 @@ fn check_dm(
     s: &MotorState,
     status: DmStatus,
     special: Option<DmSpecial>,
+    probe: bool,
     t: &Track,
     i: usize,
 ) {
@@ -717,9 +731,16 @@ fn check_dm(
     } else {
         assert!(s.command.abs() <= l.t_max_nm, "{}", ctx());
     }
-    // A special command is sent when asked for, or (auto-enable) while the motor reports
-    // Disabled and a mode is set; otherwise an MIT command, which must not look like one.
-    let auto = info.auto_enable && status == DmStatus::Disabled && s.mode != ControlMode::Disabled;
+    // A special command is sent when asked for, or (auto-enable, a mode set) while the motor
+    // reports Disabled or, offline, as a probe; otherwise an MIT command, which must not look
+    // like one.
+    let auto = info.auto_enable
+        && s.mode != ControlMode::Disabled
+        && if s.online {
+            status == DmStatus::Disabled
+        } else {
+            probe
+        };
     let expected_special = special.or(auto.then_some(DmSpecial::Enable));
     if let Some(sp) = expected_special {
         assert_eq!(d, sp.bytes(), "expected {sp:?}: {}", ctx());

@@ -27,9 +27,11 @@
 //! `Continue` unwraps the first new position against the last one before the outage (the
 //! output moved less than `p_max` meanwhile), `Restart` takes it as it comes, with no wraps
 //! (choose it if the motor may have been power-cycled: its reported position then starts
-//! again from its saved zero). Either way a software homing offset still applies, and a
-//! total-angle target set before the outage stays in force: after a `Restart` set it again,
-//! as it may now lie outside the reachable ±`p_max` (packing clamps it to the range end).
+//! again from its saved zero). Either way a software homing offset still applies (a homing
+//! asked for while offline waits for the first reading after the return), and a
+//! total-angle target set before the outage stays in force. After a `Restart` set it again:
+//! should it now lie outside the reachable ±`p_max`, the motor holds where it is rather than
+//! run to the end of the range.
 
 use super::{
     ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,
@@ -44,6 +46,11 @@ use core::f32::consts::TAU;
 use core::fmt;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+/// With [`DmConfig::auto_enable`], a motor that sends no feedback (not yet answered, or
+/// offline) is sent Enable on every this many ticks (10 ms at 1 kHz), zero torque on the
+/// others.
+pub const PROBE_TICKS: u8 = 10;
 
 /// Largest MIT position gain (fixed by the protocol).
 pub const KP_MAX: f32 = 500.0;
@@ -266,8 +273,12 @@ pub struct DmConfig {
     pub position_kp: f32,
     /// Velocity gain used by the angle targets, N·m·s/rad.
     pub position_kd: f32,
-    /// Send Enable automatically while the motor reports Disabled and a target is set (never
-    /// while it reports a fault: faults are cleared explicitly).
+    /// Send Enable automatically while a target is set and the motor reports Disabled (never
+    /// while it reports a fault: faults are cleared explicitly), and as a probe on every
+    /// [`PROBE_TICKS`]-th tick while it sends no feedback (before its first answer, or
+    /// offline: a motor power-cycled during an outage comes back in Disabled, and may not
+    /// answer until enabled). A motor back from an outage resumes its target, as DJI motors
+    /// do.
     pub auto_enable: bool,
     /// Gearbox of the motor (informational: positions are already of the output shaft).
     pub gear: GearRatio,
@@ -300,7 +311,9 @@ impl DmConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum DmError {
-    /// The CAN ID or master ID is above 0x7FF, or they are equal.
+    /// The CAN ID is 0x7FF or above (0x7FF is Damiao's parameter channel: an MIT frame
+    /// there could be read as a register write), the master ID is above 0x7FF, or they are
+    /// equal.
     InvalidId,
     /// A range is not finite and positive or above [`MAX_MIT_RANGE`], a gain is not within the
     /// protocol's range, or the position range is below ±π (angle targets need a whole turn
@@ -342,6 +355,8 @@ struct DmState {
     /// Software homing: added to the motor's own position, rad.
     home_offset_rad: f32,
     pending_home_deg: Option<f32>,
+    /// Ticks without feedback until the next Enable probe (auto-enable).
+    probe_in: u8,
     torque_ff_nm: f32,
     out: [u8; 8],
 }
@@ -377,7 +392,7 @@ pub struct DmMotor {
 impl DmMotor {
     /// A motor commanded on `can_id` whose feedback arrives on `config.master_id`.
     pub const fn new(can_id: u16, config: DmConfig) -> Result<Self, DmError> {
-        if can_id > 0x7FF || config.master_id > 0x7FF || can_id == config.master_id {
+        if can_id >= 0x7FF || config.master_id > 0x7FF || can_id == config.master_id {
             return Err(DmError::InvalidId);
         }
         let l = config.limits;
@@ -418,6 +433,7 @@ impl DmMotor {
                 feed_forward_nm: 0.0,
                 home_offset_rad: 0.0,
                 pending_home_deg: None,
+                probe_in: PROBE_TICKS - 1,
                 torque_ff_nm: 0.0,
                 out: [0; 8],
             })),
@@ -463,7 +479,9 @@ impl DmMotor {
     /// - `SaveZero` makes the motor's present position its zero; the driver's multi-turn
     ///   count starts afresh from the next reading (wraps so far and a software homing
     ///   offset from [`Motor::set_total_angle_here_deg`] are cleared when FE is sent; a
-    ///   homing asked for before then applies to the first reading after it).
+    ///   homing asked for before then applies to the first reading after it). An angle or
+    ///   total-angle target refers to the new zero from then on: a joint holding 100° moves
+    ///   another 100° after FE. Disable it (or set the target it should hold) around FE.
     pub fn send_special(&self, special: DmSpecial) {
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
@@ -541,9 +559,16 @@ impl DmMotor {
                         short
                     }
                 } else {
-                    // Checked against the range when set; should the motor have been pushed
-                    // across the range end since, the field is clamped on packing.
-                    deg_to_rad(s.target) - s.frame_offset_rad(p_max)
+                    // Checked against the range when set. Out of it now (a return under
+                    // `Restart`, a saved zero, the joint pushed across the range end), the
+                    // field would be clamped to the range end: a place that is neither the
+                    // target nor here. The motor holds where it is instead.
+                    let field = deg_to_rad(s.target) - s.frame_offset_rad(p_max);
+                    if field.abs() <= p_max {
+                        field
+                    } else {
+                        motor_now
+                    }
                 };
                 MitCommand {
                     position_rad,
@@ -623,6 +648,12 @@ impl CanNode for DmMotor {
                 s.awaiting_return = true;
             }
             let online = s.liveness.is_online();
+            // Every PROBE_TICKS-th tick without feedback may probe with Enable.
+            let probe = !online && s.probe_in == 0;
+            s.probe_in = match s.probe_in.checked_sub(1) {
+                Some(n) if !online => n,
+                _ => PROBE_TICKS - 1,
+            };
             // A special goes to a motor that answers; while offline it waits.
             let special = if online {
                 s.pending.first().copied()
@@ -640,7 +671,11 @@ impl CanNode for DmMotor {
                     s.position_rad = None;
                 }
             }
+            // Against a live reading only: the one before an outage may be stale (the joint
+            // moved, or the motor was power-cycled), and a return's policy applies first.
             if let Some(deg) = s.pending_home_deg
+                && online
+                && !s.awaiting_return
                 && s.position_rad.is_some()
             {
                 let p_max = self.config.limits.p_max_rad;
@@ -661,10 +696,16 @@ impl CanNode for DmMotor {
                 s.torque_ff_nm = 0.0;
                 special.bytes()
             } else if self.config.auto_enable
-                && s.status == DmStatus::Disabled
                 && s.mode != ControlMode::Disabled
+                && if online {
+                    s.status == DmStatus::Disabled
+                } else {
+                    probe
+                }
             {
-                // Also what brings a motor that has not answered yet into motor mode.
+                // Online and reporting Disabled, or silent (not yet answered, or gone): a
+                // motor that answers only in motor mode, or rebooted into Disabled, is
+                // brought back. A silent motor gets zero torque between the probes.
                 s.torque_ff_nm = 0.0;
                 DmSpecial::Enable.bytes()
             } else {
@@ -1002,8 +1043,13 @@ mod tests {
     fn auto_enable_then_mit_speed_command() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
         m.set_target_rpm(60.0).unwrap(); // 2π rad/s
-        // Never answered yet: the enable frame goes out first.
-        assert_eq!(packed(&m, T0), DmSpecial::Enable.bytes());
+        // Never answered yet: zero torque, and Enable as a probe on every 10th tick.
+        for _ in 0..2 {
+            for _ in 1..PROBE_TICKS {
+                assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+            }
+            assert_eq!(packed(&m, T0), DmSpecial::Enable.bytes());
+        }
         m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
         // p 0 → (0 + 12.5)/25 · 65535 = 32767.5 → 0x7FFF; v 2π → (2π + 30)/60 · 4095 =
@@ -1142,6 +1188,102 @@ mod tests {
     }
 
     #[test]
+    fn a_motor_back_from_an_outage_in_disabled_is_probed_and_enabled_again() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let enabled = feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30);
+        m.update_feedback(&enabled, T0).unwrap();
+        m.set_target_torque_nm(5.0).unwrap();
+        assert_ne!(packed(&m, T0), ZERO_TORQUE_BYTES);
+        // Silent for 100 ms: offline. Zero torque on nine ticks, then an Enable probe (the
+        // motor was power-cycled and waits, disabled, for it), and again ten ticks later.
+        let mut t = T0 + crate::time::Duration::from_millis(101);
+        let mut sent = Vec::new();
+        for _ in 0..20 {
+            sent.push(packed(&m, t));
+            t = t + crate::time::Duration::from_millis(1);
+        }
+        assert!(!m.is_online());
+        for (i, bytes) in sent.iter().enumerate() {
+            let want = if i % 10 == 9 {
+                DmSpecial::Enable.bytes()
+            } else {
+                ZERO_TORQUE_BYTES
+            };
+            assert_eq!(*bytes, want, "offline tick {i}");
+        }
+        // It answers, disabled: online, Enable until it reports motor mode, then the target.
+        m.update_feedback(&feedback(0, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), t)
+            .unwrap();
+        assert_eq!(packed(&m, t), DmSpecial::Enable.bytes());
+        m.update_feedback(&enabled, t).unwrap();
+        // t = 5 N·m → (5 + 10) / 20 · 4095 = 3071.25 → 0xBFF in D6 low nibble and D7.
+        let bytes = packed(&m, t);
+        assert_eq!((bytes[6] & 0x0F, bytes[7]), (0x0B, 0xFF));
+    }
+
+    #[test]
+    fn without_auto_enable_a_silent_motor_gets_zero_torque_only() {
+        let mut cfg = DmConfig::new(0x11);
+        cfg.auto_enable = false;
+        let m = DmMotor::new(0x01, cfg).unwrap();
+        m.set_target_torque_nm(5.0).unwrap();
+        for _ in 0..3 * PROBE_TICKS {
+            assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+        }
+    }
+
+    #[test]
+    fn homing_asked_while_offline_waits_for_a_reading_after_the_return() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(
+            &feedback(1, 1, position_code(5.0), 0x7FF, 0x7FF, 30, 30),
+            T0,
+        )
+        .unwrap();
+        let later = T0 + crate::time::Duration::from_millis(150);
+        packed(&m, later);
+        assert!(!m.is_online());
+        // "Here is 0", asked while the last reading (5 rad) is stale.
+        m.set_total_angle_here_deg(0.0).unwrap();
+        packed(&m, later);
+        // Back at 0.3 rad (the joint sagged meanwhile): that is where 0 is.
+        m.update_feedback(
+            &feedback(1, 1, position_code(0.3), 0x7FF, 0x7FF, 30, 30),
+            later,
+        )
+        .unwrap();
+        packed(&m, later);
+        assert!(
+            m.total_angle_deg().unwrap().abs() < 0.01,
+            "{:?}",
+            m.total_angle_deg()
+        );
+    }
+
+    #[test]
+    fn a_total_angle_target_out_of_reach_after_a_restart_holds_instead_of_running_to_the_range_end()
+    {
+        let m = wrapped_then_offline(MultiTurnOnReturn::Restart);
+        // One wrap forward: the reachable range is 12.5–37.5 rad; 1000° = 17.45 rad is in it.
+        m.set_target_total_angle_deg(1000.0).unwrap();
+        // Power-cycled: back at -1.27 rad with no wraps. 17.45 rad is now beyond +12.5.
+        let t = Instant::from_millis(160);
+        m.update_feedback(
+            &feedback(1, 1, position_code(-1.27), 0x7FF, 0x7FF, 30, 30),
+            t,
+        )
+        .unwrap();
+        let p = packed_position_rad(&packed(&m, t));
+        // Held where it is (clamped, the field was 12.5 rad: 13.8 rad, 2.2 turns, away).
+        assert!((p + 1.27).abs() < 2e-3, "p = {p}");
+        assert_eq!(m.state().target, 1000.0);
+        // A target set again within reach is followed.
+        m.set_target_total_angle_deg(90.0).unwrap();
+        let p = packed_position_rad(&packed(&m, t));
+        assert!((p - deg_to_rad(90.0)).abs() < 2e-3, "p = {p}");
+    }
+
+    #[test]
     fn offline_sends_zero_torque() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
         m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
@@ -1177,6 +1319,12 @@ mod tests {
         let mut cfg = DmConfig::new(0x11);
         cfg.position_kp = 600.0;
         assert_eq!(DmMotor::new(1, cfg).unwrap_err(), DmError::InvalidLimit);
+        // 0x7FF is Damiao's parameter channel; 0x7FE is a motor like any other.
+        assert_eq!(
+            DmMotor::new(0x7FF, DmConfig::new(0x11)).unwrap_err(),
+            DmError::InvalidId
+        );
+        assert!(DmMotor::new(0x7FE, DmConfig::new(0x11)).is_ok());
         let mut short = DmConfig::new(0x11);
         short.limits.p_max_rad = 3.0; // below π: no equivalent angle inside for some targets
         assert_eq!(DmMotor::new(1, short).unwrap_err(), DmError::InvalidLimit);
