@@ -416,13 +416,8 @@ impl<'a> Harness<'a> {
                     } else {
                         None
                     };
-                    t.offline_ticks = if state.online {
-                        0
-                    } else {
-                        t.offline_ticks + 1
-                    };
-                    let probe =
-                        !state.online && t.offline_ticks % u32::from(dm::PROBE_TICKS) == 0;
+                    t.offline_ticks = if state.online { 0 } else { t.offline_ticks + 1 };
+                    let probe = !state.online && t.offline_ticks % u32::from(dm::PROBE_TICKS) == 0;
                     check_dm(
                         &frames,
                         &info,
