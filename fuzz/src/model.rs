@@ -648,7 +648,8 @@ fn check_vesc(frames: &[CanFrame], info: &VescInfo, s: &MotorState, t: &Track, i
         );
         return;
     }
-    // The user's limit applies to current and brake commands in current and torque modes.
+    // The user's limit applies to current and brake commands in current and torque modes,
+    // and to the zero-speed brake of speed mode.
     let user = if matches!(s.mode, ControlMode::Current | ControlMode::Torque) {
         f64::from(t.user_limit)
     } else {
@@ -668,7 +669,7 @@ fn check_vesc(frames: &[CanFrame], info: &VescInfo, s: &MotorState, t: &Track, i
             )
         }
         vp::SET_CURRENT_BRAKE => {
-            let limit = f64::from(info.max_brake).min(user) * 1000.0;
+            let limit = f64::from(info.max_brake).min(f64::from(t.user_limit)) * 1000.0;
             assert!(
                 value >= 0 && within(value, limit),
                 "brake outside [0, {limit}] mA: {}",

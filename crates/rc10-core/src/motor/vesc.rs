@@ -353,9 +353,10 @@ impl VescMotor {
         self.set(ControlMode::Voltage, duty, Some(duty), None)
     }
 
-    /// Commands a brake current in amps (taken by magnitude, clamped to the brake limit).
+    /// Commands a brake current in amps (taken by magnitude, clamped to the brake limit);
+    /// `state().target` reads its magnitude.
     pub fn set_brake_current(&self, amps: f32) -> Result<(), TargetError> {
-        self.set(ControlMode::Current, 0.0, None, Some(amps))
+        self.set(ControlMode::Current, amps.abs(), None, Some(amps))
     }
 
     /// Last measured duty cycle (−1…1).
@@ -427,9 +428,9 @@ impl VescMotor {
                 let rpm = saturate(s.target, c.max_speed_rpm);
                 match c.zero_speed_brake_amps {
                     // Rounded half away from zero on the wire: below half an eRPM it is 0.
-                    Some(b) if (rpm * c.erpm_per_rpm()).abs() < 0.5 => {
-                        VescCommand::Brake(saturate(b, c.max_brake_amps))
-                    }
+                    Some(b) if (rpm * c.erpm_per_rpm()).abs() < 0.5 => VescCommand::Brake(
+                        saturate(saturate(b, c.max_brake_amps), s.user_current_limit),
+                    ),
                     _ => VescCommand::Erpm(rpm * c.erpm_per_rpm()),
                 }
             }
@@ -564,8 +565,9 @@ impl Motor for VescMotor {
         self.set(ControlMode::Torque, torque_nm, None, None)
     }
 
-    /// Limits current, brake and torque commands. In speed, duty and position modes the VESC
-    /// runs its own loop and the current limits set in VESC Tool apply instead.
+    /// Limits current, brake and torque commands, the zero-speed brake of speed mode
+    /// included. Otherwise in speed, duty and position modes the VESC runs its own loop and
+    /// the current limits set in VESC Tool apply instead.
     fn set_current_limit_amps(&self, amps: f32) -> Result<(), TargetError> {
         if amps.is_nan() {
             return Err(TargetError::NotFinite);
@@ -706,7 +708,7 @@ mod tests {
         // 0.07 rpm × 7 pole pairs = 0.49 eRPM: 0 on the wire, so the brake too.
         braking.set_target_rpm(0.07).unwrap();
         assert_eq!(packed(&braking), (0x0203, vec![0, 0, 0x13, 0x88]));
-        // 0.08 rpm = 0.56 eRPM: SET_RPM 1.
+        // -0.08 rpm = -0.56 eRPM: SET_RPM -1.
         braking.set_target_rpm(-0.08).unwrap();
         assert_eq!(packed(&braking), (0x0303, vec![0xFF, 0xFF, 0xFF, 0xFF]));
         // Exactly half an eRPM (0.25 rpm × 2 pole pairs) rounds away from zero: SET_RPM 1.
@@ -716,6 +718,11 @@ mod tests {
         online(&two_poles);
         two_poles.set_target_rpm(0.25).unwrap();
         assert_eq!(packed(&two_poles), (0x0303, vec![0, 0, 0, 1]));
+        // The user's current limit caps this brake as it caps an explicit one: 2 A = 2000 mA
+        // (0x07D0).
+        braking.set_current_limit_amps(2.0).unwrap();
+        braking.set_target_rpm(0.0).unwrap();
+        assert_eq!(packed(&braking), (0x0203, vec![0, 0, 0x07, 0xD0]));
     }
 
     #[test]
@@ -739,6 +746,10 @@ mod tests {
         assert_eq!(packed(&m).1, 100_000i32.to_be_bytes().to_vec());
         m.set_brake_current(-8.0).unwrap(); // magnitude
         assert_eq!(packed(&m), (0x0209, 8_000i32.to_be_bytes().to_vec()));
+        assert_eq!(
+            (m.state().mode, m.state().target),
+            (ControlMode::Current, 8.0)
+        );
         m.set_target_angle_deg(-90.0).unwrap(); // 270° = 270 000 000
         assert_eq!(packed(&m), (0x0409, 270_000_000i32.to_be_bytes().to_vec()));
     }
