@@ -111,3 +111,32 @@ fn a_mixed_bus_fits_the_g4_filter_elements() {
     }
     assert_eq!(plan.fifo_of(0x0E21, true), None); // STATUS_2 was not configured
 }
+
+#[test]
+fn start_accepts_only_an_instance_in_configuration() {
+    // What CanConfigurator::new leaves: INIT and CCE set.
+    assert!(status::in_configuration(true, true));
+    // Reset state (INIT set, CCE clear): another FDCAN nobody configured.
+    assert!(!status::in_configuration(true, false));
+    // Running (INIT clear): a FDCAN already started.
+    assert!(!status::in_configuration(false, false));
+    assert!(!status::in_configuration(false, true));
+}
+
+#[test]
+fn the_watchdog_is_fed_only_while_every_scheduler_ticks() {
+    let mut progress = status::TickProgress::new();
+    // The first look only records.
+    assert!(progress.all_advanced([10, 20]));
+    assert!(progress.all_advanced([60, 70]));
+    // Bus 2's scheduler stopped: no feeding, however far bus 1 went.
+    assert!(!progress.all_advanced([110, 70]));
+    assert!(!progress.all_advanced([160, 70]));
+    // It runs again.
+    assert!(progress.all_advanced([210, 71]));
+    // A counter that wrapped round moved.
+    assert!(progress.all_advanced([u32::MAX, 72]));
+    assert!(progress.all_advanced([3, 73]));
+    // No buses: nothing to wait for.
+    assert!(status::TickProgress::new().all_advanced([]));
+}

@@ -62,6 +62,20 @@ pub const TX_BUFFERS: u8 = 3;
 /// A filter plan sized for an STM32G4 FDCAN.
 pub type G4FilterPlan = FilterPlan<STANDARD_FILTERS, EXTENDED_FILTERS>;
 
+/// [`start`] was told an instance that is not in configuration: not the peripheral the
+/// configurator was made from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WrongInstance(pub Instance);
+
+impl core::fmt::Display for WrongInstance {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{:?} is not the configurator's FDCAN", self.0)
+    }
+}
+
+impl core::error::Error for WrongInstance {}
+
 /// Which FDCAN peripheral (for the registers the driver does not expose).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -101,12 +115,24 @@ impl Instance {
 ///
 /// If no bit timing gives `bitrate_bps` from the FDCAN kernel clock (embassy-stm32's
 /// `set_bitrate`). 1 Mbit/s from a 170 MHz or 85 MHz clock works.
+///
+/// # Errors
+///
+/// [`WrongInstance`] if `instance` is not in configuration, so cannot be the configurator's
+/// peripheral (a copy-paste slip such as `Instance::Fdcan1` with FDCAN2's configurator would
+/// otherwise read, and clear, another bus's status and message-lost flags); nothing is
+/// started. The check cannot tell two configurators alive at once apart: start each bus
+/// before making the next one's configurator.
 pub fn start(
     mut configurator: CanConfigurator<'static>,
     instance: Instance,
     plan: &G4FilterPlan,
     bitrate_bps: u32,
-) -> (FdcanTx, FdcanRx) {
+) -> Result<(FdcanTx, FdcanRx), WrongInstance> {
+    let cccr = instance.regs().cccr().read();
+    if !status::in_configuration(cccr.init(), cccr.cce()) {
+        return Err(WrongInstance(instance));
+    }
     configurator.set_bitrate(bitrate_bps);
     let config = configurator
         .config()
@@ -126,7 +152,7 @@ pub fn start(
     configurator.properties().set_extended_filters(&extended);
     let (tx, rx, _properties) = configurator.into_normal_mode().split();
     let regs = instance.regs();
-    (
+    Ok((
         FdcanTx {
             tx,
             regs,
@@ -137,7 +163,7 @@ pub fn start(
             regs,
             held: None,
         },
-    )
+    ))
 }
 
 fn action(fifo: Fifo) -> Action {

@@ -22,6 +22,9 @@
 //! let (tx, rx) = rc10_stm32::start_can(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs), Instance::Fdcan1, bus)?;
 //! control.spawn(scheduler_task(bus, tx)?);
 //! control.spawn(receiver_task(bus, rx)?);
+//! // Reset the board if a scheduler stops ticking (thread-mode executor).
+//! static BUSES: StaticCell<[&'static G4Bus; 1]> = StaticCell::new();
+//! spawner.spawn(watchdog_task(IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US), BUSES.init([bus]))?);
 //! ```
 //!
 //! The firmware examples in `examples/stm32g474/` are complete, commented versions.
@@ -116,22 +119,39 @@ pub fn filter_plan<const N: usize>(
     can::G4FilterPlan::new(bus.nodes().iter().map(|node| node.bus_usage()))
 }
 
+/// Why [`start_can`] started nothing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StartError {
+    /// The nodes' IDs do not fit the FDCAN's filter elements.
+    Filters(PlanError),
+    /// `instance` does not name the configurator's peripheral.
+    WrongInstance(can::Instance),
+}
+
+impl core::fmt::Display for StartError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Filters(e) => write!(f, "{e}"),
+            Self::WrongInstance(i) => write!(f, "{}", can::WrongInstance(*i)),
+        }
+    }
+}
+
+impl core::error::Error for StartError {}
+
 /// Starts a FDCAN for a frozen `bus`: the acceptance filters planned from its nodes
 /// ([`filter_plan`]) and the bitrate of its own configuration (`bus.config().bitrate_bps`, the
 /// one its load figures and frame budget are computed with), through [`can::start`], whose
-/// requirements apply (`instance` names the configurator's peripheral; the FDCAN kernel clock
-/// is configured). Returns the halves for [`tasks::scheduler_task`] and
-/// [`tasks::receiver_task`], or why the nodes' IDs do not fit the filters.
+/// requirements apply (`instance` names the configurator's peripheral, which is checked; the
+/// FDCAN kernel clock is configured). Returns the halves for [`tasks::scheduler_task`] and
+/// [`tasks::receiver_task`], or why nothing was started.
 pub fn start_can<const N: usize>(
     configurator: embassy_stm32::can::CanConfigurator<'static>,
     instance: can::Instance,
     bus: &rc10_core::bus::Bus<'_, N>,
-) -> Result<(can::FdcanTx, can::FdcanRx), PlanError> {
-    let plan = filter_plan(bus)?;
-    Ok(can::start(
-        configurator,
-        instance,
-        &plan,
-        bus.config().bitrate_bps,
-    ))
+) -> Result<(can::FdcanTx, can::FdcanRx), StartError> {
+    let plan = filter_plan(bus).map_err(StartError::Filters)?;
+    can::start(configurator, instance, &plan, bus.config().bitrate_bps)
+        .map_err(|can::WrongInstance(i)| StartError::WrongInstance(i))
 }

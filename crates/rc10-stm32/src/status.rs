@@ -47,3 +47,40 @@ pub fn pending_frames(request_pending: [bool; 3]) -> u8 {
 pub fn message_lost(rf0l: bool, rf1l: bool) -> Option<[bool; 2]> {
     (rf0l || rf1l).then_some([rf0l, rf1l])
 }
+
+/// Whether a FDCAN is in configuration (`CCCR.INIT` and `CCCR.CCE` set), as
+/// `CanConfigurator::new` leaves the peripheral it was made from: [`crate::can::start`]
+/// checks that the instance it is told names that peripheral (one left at reset has `CCE`
+/// clear; one already started, `INIT` clear).
+pub fn in_configuration(init: bool, cce: bool) -> bool {
+    init && cce
+}
+
+/// Whether every bus's scheduler has ticked since the last look, from their tick counters
+/// (up to three buses, as a G4 has three FDCANs): what the watchdog task feeds the watchdog
+/// on. The first look only records the counts.
+#[derive(Debug, Default)]
+pub struct TickProgress {
+    last: [Option<u32>; 3],
+}
+
+impl TickProgress {
+    /// Nothing seen yet.
+    pub const fn new() -> Self {
+        Self { last: [None; 3] }
+    }
+
+    /// Records `ticks` (each bus's tick count, in a fixed order; beyond three ignored) and
+    /// says whether every count moved since the previous call. A counter that wrapped round
+    /// moved. The first call, and a call with no buses, say `true`.
+    pub fn all_advanced(&mut self, ticks: impl IntoIterator<Item = u32>) -> bool {
+        let mut all = true;
+        for (last, now) in self.last.iter_mut().zip(ticks) {
+            if *last == Some(now) {
+                all = false;
+            }
+            *last = Some(now);
+        }
+        all
+    }
+}

@@ -3,6 +3,10 @@
 //! be spawned once per FDCAN (pool of three).
 
 use crate::can::{FdcanRx, FdcanTx};
+use crate::status::TickProgress;
+use embassy_stm32::peripherals::IWDG;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_time::{Duration, Ticker};
 use rc10_core::bus::{Bus, run_receiver, run_scheduler};
 
 /// Most nodes on one bus (at 1 kHz a classic CAN bus carries six DJI motors at most; eight
@@ -26,4 +30,40 @@ pub async fn scheduler_task(bus: &'static G4Bus, tx: FdcanTx) -> ! {
 #[embassy_executor::task(pool_size = 3)]
 pub async fn receiver_task(bus: &'static G4Bus, rx: FdcanRx) -> ! {
     run_receiver(bus, rx).await
+}
+
+/// How often [`watchdog_task`] looks at the schedulers' tick counts.
+pub const WATCHDOG_CHECK: Duration = Duration::from_millis(50);
+
+/// The watchdog timeout the examples use, in µs (`IndependentWatchdog::new`): five looks of
+/// [`WATCHDOG_CHECK`], so a scheduler stalled by a bounded hold-up (tens of ms) never trips it.
+pub const WATCHDOG_TIMEOUT_US: u32 = 250_000;
+
+/// Feeds the independent watchdog every [`WATCHDOG_CHECK`] while the scheduler of every bus
+/// in `buses` (up to three) has ticked since the last look. A scheduler that stops (a hang,
+/// a fault, a panic that halts the core) or a thread-mode executor that no longer runs this
+/// task (an application task that never yields, so stale targets would stay in force) stops
+/// the feeding, and the IWDG resets the MCU at its timeout: the motors are commanded again
+/// from a clean start, and go offline-safe (no command) meanwhile.
+///
+/// Spawn it on the thread-mode executor, with the watchdog made from `p.IWDG` and a timeout of
+/// several looks ([`WATCHDOG_TIMEOUT_US`]). It also freezes the IWDG while a debugger halts
+/// the core (DBGMCU), so breakpoints do not reset the board.
+#[embassy_executor::task]
+pub async fn watchdog_task(
+    mut watchdog: IndependentWatchdog<'static, IWDG>,
+    buses: &'static [&'static G4Bus],
+) -> ! {
+    embassy_stm32::pac::DBGMCU
+        .apb1lfzr()
+        .modify(|w| w.set_iwdg(true));
+    let mut progress = TickProgress::new();
+    watchdog.unleash();
+    let mut ticker = Ticker::every(WATCHDOG_CHECK);
+    loop {
+        ticker.next().await;
+        if progress.all_advanced(buses.iter().map(|bus| bus.stats().snapshot().ticks)) {
+            watchdog.pet();
+        }
+    }
 }

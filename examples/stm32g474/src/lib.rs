@@ -66,27 +66,39 @@ pub const fn bus_builder() -> BusBuilder<'static, MAX_NODES> {
     BusBuilder::with_config(bus_config())
 }
 
-/// FDCAN1's configurator on PA11 (RX) / PA12 (TX).
+/// FDCAN1's configurator on PA11 (RX) / PA12 (TX), with the instance that names it (the
+/// pair [`start_bus`] takes, so the two cannot disagree).
 #[macro_export]
 macro_rules! fdcan1 {
     ($p:ident) => {
-        embassy_stm32::can::CanConfigurator::new($p.FDCAN1, $p.PA11, $p.PA12, $crate::Irqs)
+        (
+            embassy_stm32::can::CanConfigurator::new($p.FDCAN1, $p.PA11, $p.PA12, $crate::Irqs),
+            rc10_stm32::can::Instance::Fdcan1,
+        )
     };
 }
 
-/// FDCAN2's configurator on PB12 (RX) / PB13 (TX).
+/// FDCAN2's configurator on PB12 (RX) / PB13 (TX), with the instance that names it (the
+/// pair [`start_bus`] takes, so the two cannot disagree).
 #[macro_export]
 macro_rules! fdcan2 {
     ($p:ident) => {
-        embassy_stm32::can::CanConfigurator::new($p.FDCAN2, $p.PB12, $p.PB13, $crate::Irqs)
+        (
+            embassy_stm32::can::CanConfigurator::new($p.FDCAN2, $p.PB12, $p.PB13, $crate::Irqs),
+            rc10_stm32::can::Instance::Fdcan2,
+        )
     };
 }
 
-/// FDCAN3's configurator on PA8 (RX) / PB4 (TX).
+/// FDCAN3's configurator on PA8 (RX) / PB4 (TX), with the instance that names it (the
+/// pair [`start_bus`] takes, so the two cannot disagree).
 #[macro_export]
 macro_rules! fdcan3 {
     ($p:ident) => {
-        embassy_stm32::can::CanConfigurator::new($p.FDCAN3, $p.PA8, $p.PB4, $crate::Irqs)
+        (
+            embassy_stm32::can::CanConfigurator::new($p.FDCAN3, $p.PA8, $p.PB4, $crate::Irqs),
+            rc10_stm32::can::Instance::Fdcan3,
+        )
     };
 }
 
@@ -169,8 +181,7 @@ pub fn control_spawner() -> SendSpawner {
 pub fn start_bus(
     builder: BusBuilder<'static, MAX_NODES>,
     cell: &'static StaticCell<G4Bus>,
-    configurator: can::CanConfigurator<'static>,
-    instance: Instance,
+    (configurator, instance): (can::CanConfigurator<'static>, Instance),
     control: SendSpawner,
 ) -> &'static G4Bus {
     let bus: &'static G4Bus = cell.init(builder.build());
@@ -178,6 +189,27 @@ pub fn start_bus(
     control.spawn(defmt::unwrap!(scheduler_task(bus, tx)));
     control.spawn(defmt::unwrap!(receiver_task(bus, rx)));
     bus
+}
+
+/// Starts the independent watchdog, fed by `rc10_stm32::tasks::watchdog_task` on `$spawner`
+/// (the thread-mode executor's) while every listed bus's scheduler ticks: a hung scheduler
+/// or a starved thread-mode executor resets the board after
+/// `rc10_stm32::tasks::WATCHDOG_TIMEOUT_US` (250 ms). Once started it cannot be stopped.
+#[macro_export]
+macro_rules! start_watchdog {
+    ($spawner:expr, $p:ident, [$($bus:expr),+ $(,)?]) => {{
+        static BUSES: static_cell::StaticCell<
+            [&'static rc10_stm32::tasks::G4Bus; { [$(stringify!($bus)),+].len() }],
+        > = static_cell::StaticCell::new();
+        let watchdog = embassy_stm32::wdg::IndependentWatchdog::new(
+            $p.IWDG,
+            rc10_stm32::tasks::WATCHDOG_TIMEOUT_US,
+        );
+        $spawner.spawn(defmt::unwrap!(rc10_stm32::tasks::watchdog_task(
+            watchdog,
+            BUSES.init([$($bus),+]),
+        )));
+    }};
 }
 
 /// Logs a bus's counters (once a second is plenty).

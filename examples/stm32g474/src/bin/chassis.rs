@@ -27,7 +27,6 @@ use rc10_core::remote::Shared;
 use rc10_core::remote::dbus::DbusReceiver;
 use rc10_core::telemetry::Channels;
 use rc10_examples_stm32g474 as board;
-use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
 use rc10_stm32::telemetry::{VofaStats, run_vofa};
 use static_cell::StaticCell;
@@ -53,13 +52,8 @@ async fn main(spawner: Spawner) {
     for wheel in &WHEELS {
         defmt::unwrap!(builder.register(wheel));
     }
-    let bus = board::start_bus(
-        builder,
-        &BUS,
-        board::fdcan1!(p),
-        Instance::Fdcan1,
-        board::control_spawner(),
-    );
+    let bus = board::start_bus(builder, &BUS, board::fdcan1!(p), board::control_spawner());
+    board::start_watchdog!(spawner, p, [bus]);
     spawner.spawn(defmt::unwrap!(rc10_stm32::remote::dbus_task(
         board::dr16_uart!(p),
         &DR16

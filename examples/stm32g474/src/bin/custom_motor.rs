@@ -16,7 +16,6 @@ use rc10_core::motor::Motor;
 use rc10_core::motor::dji::DjiMotor;
 use rc10_examples_stm32g474 as board;
 use rc10_examples_stm32g474::my_motor::MyMotor;
-use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
 use static_cell::StaticCell;
 
@@ -28,18 +27,13 @@ static WHEEL: DjiMotor = match DjiMotor::m3508(1) {
 static BUS: StaticCell<G4Bus> = StaticCell::new();
 
 #[embassy_executor::main]
-async fn main(_spawner: Spawner) {
+async fn main(spawner: Spawner) {
     let p = board::init();
     let mut builder = board::bus_builder();
     defmt::unwrap!(builder.register(&WHEEL));
     defmt::unwrap!(builder.register(&MINE));
-    let bus = board::start_bus(
-        builder,
-        &BUS,
-        board::fdcan1!(p),
-        Instance::Fdcan1,
-        board::control_spawner(),
-    );
+    let bus = board::start_bus(builder, &BUS, board::fdcan1!(p), board::control_spawner());
+    board::start_watchdog!(spawner, p, [bus]);
 
     // Code written against the trait drives both motors alike.
     let motors: [&dyn Motor; 2] = [&WHEEL, &MINE];

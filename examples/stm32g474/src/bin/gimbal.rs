@@ -22,7 +22,6 @@ use rc10_core::encoder::Origin;
 use rc10_core::motor::Motor;
 use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
 use rc10_examples_stm32g474 as board;
-use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
 use static_cell::StaticCell;
 
@@ -60,13 +59,8 @@ async fn main(spawner: Spawner) {
     let mut builder = board::bus_builder();
     defmt::unwrap!(builder.register(&YAW));
     defmt::unwrap!(builder.register(&PITCH));
-    board::start_bus(
-        builder,
-        &BUS,
-        board::fdcan2!(p),
-        Instance::Fdcan2,
-        board::control_spawner(),
-    );
+    let bus = board::start_bus(builder, &BUS, board::fdcan2!(p), board::control_spawner());
+    board::start_watchdog!(spawner, p, [bus]);
     spawner.spawn(defmt::unwrap!(log_state()));
     if !CALIBRATED {
         defmt::warn!(

@@ -15,7 +15,6 @@ use embassy_time::{Duration, Ticker, Timer};
 use rc10_core::motor::Motor;
 use rc10_core::motor::dji::DjiMotor;
 use rc10_examples_stm32g474 as board;
-use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
 use static_cell::StaticCell;
 
@@ -30,13 +29,8 @@ async fn main(spawner: Spawner) {
     let p = board::init();
     let mut builder = board::bus_builder();
     defmt::unwrap!(builder.register(&WHEEL));
-    board::start_bus(
-        builder,
-        &BUS,
-        board::fdcan1!(p),
-        Instance::Fdcan1,
-        board::control_spawner(),
-    );
+    let bus = board::start_bus(builder, &BUS, board::fdcan1!(p), board::control_spawner());
+    board::start_watchdog!(spawner, p, [bus]);
     spawner.spawn(defmt::unwrap!(log_state()));
 
     defmt::unwrap!(WHEEL.set_target_rpm(100.0));

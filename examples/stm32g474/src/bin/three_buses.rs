@@ -22,7 +22,6 @@ use rc10_core::encoder::Origin;
 use rc10_core::motor::Motor;
 use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
 use rc10_examples_stm32g474 as board;
-use rc10_stm32::can::Instance;
 use rc10_stm32::tasks::G4Bus;
 use static_cell::StaticCell;
 
@@ -56,7 +55,7 @@ static BUS2: StaticCell<G4Bus> = StaticCell::new();
 static BUS3: StaticCell<G4Bus> = StaticCell::new();
 
 #[embassy_executor::main]
-async fn main(_spawner: Spawner) {
+async fn main(spawner: Spawner) {
     let p = board::init();
     let control = board::control_spawner();
     let mut b1 = board::bus_builder();
@@ -74,17 +73,18 @@ async fn main(_spawner: Spawner) {
     let buses = [
         (
             "FDCAN1",
-            board::start_bus(b1, &BUS1, board::fdcan1!(p), Instance::Fdcan1, control),
+            board::start_bus(b1, &BUS1, board::fdcan1!(p), control),
         ),
         (
             "FDCAN2",
-            board::start_bus(b2, &BUS2, board::fdcan2!(p), Instance::Fdcan2, control),
+            board::start_bus(b2, &BUS2, board::fdcan2!(p), control),
         ),
         (
             "FDCAN3",
-            board::start_bus(b3, &BUS3, board::fdcan3!(p), Instance::Fdcan3, control),
+            board::start_bus(b3, &BUS3, board::fdcan3!(p), control),
         ),
     ];
+    board::start_watchdog!(spawner, p, [buses[0].1, buses[1].1, buses[2].1]);
 
     for m in &WHEELS {
         defmt::unwrap!(m.set_target_rpm(50.0));
