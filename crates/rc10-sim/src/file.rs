@@ -29,8 +29,7 @@
 //! ```
 //!
 //! A mecanum chassis driven by a DR16 remote (motors 1–4 are FL, FR, RL, RR; the chassis sets
-//! their speeds, so `[[target]]`s are for the other motors only, and a run refuses one on a
-//! wheel):
+//! their speeds, so `[[target]]`s are for the other motors only: one on a wheel is refused):
 //!
 //! ```toml
 //! [chassis]
@@ -363,6 +362,16 @@ pub fn parse(text: &str) -> Result<Scenario, FileError> {
     for (i, t) in file.targets.iter().enumerate() {
         let n = i + 1;
         let motor = motor_index(format!("target[{n}].motor"), t.motor)?;
+        // (With fewer than four motors the chassis itself is refused below.)
+        if file.chassis.is_some() && motor < 4 && motors.len() >= 4 {
+            return Err(invalid(
+                format!("target[{n}].motor"),
+                format!(
+                    "motor {} is a chassis wheel: the chassis sets its speed every tick",
+                    motor + 1
+                ),
+            ));
+        }
         if t.steps.windows(2).any(|w| matches!(w, [a, b] if b.0 < a.0)) {
             return Err(invalid(
                 format!("target[{n}].steps"),
@@ -852,6 +861,13 @@ mod tests {
         let drive = s.chassis.unwrap();
         assert_eq!(drive.sticks[1], (100, [0.0, 0.0, 0.0, 1.0]));
         assert_eq!(drive.radio_off, vec![(300, 400)]);
+        // A target on a wheel would be overwritten by the chassis at every tick.
+        let on_wheel =
+            format!("{text}[[target]]\nmotor = 2\nkind = \"rpm\"\nsteps = [[0, 100.0]]\n");
+        assert!(matches!(
+            parse(&on_wheel).unwrap_err(),
+            FileError::Invalid { field, problem } if field == "target[1].motor" && problem.contains("motor 2 is a chassis wheel")
+        ));
         let bad = text.replace("1.0]]", "1.5]]");
         assert!(matches!(
             parse(&bad).unwrap_err(),

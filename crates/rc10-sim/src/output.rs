@@ -85,7 +85,7 @@ pub fn summary(scenario: &Scenario, result: &RunResult) -> String {
     );
     let _ = writeln!(
         s,
-        "faults    frames lost {}, RX FIFO overruns {}, device TX drops {}",
+        "faults    frames lost {}, frames lost in full RX FIFOs {}, device TX drops {}",
         result.bus.lost, result.rx_overruns, result.bus.device_tx_dropped
     );
     s

@@ -46,9 +46,16 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 250_000;
 /// the feeding, and the IWDG resets the MCU at its timeout: the motors are commanded again
 /// from a clean start, and go offline-safe (no command) meanwhile.
 ///
-/// Spawn it on the thread-mode executor, with the watchdog made from `p.IWDG` and a timeout of
-/// several looks ([`WATCHDOG_TIMEOUT_US`]). It also freezes the IWDG while a debugger halts
-/// the core (DBGMCU), so breakpoints do not reset the board.
+/// A scheduler that stops is seen at the second look after its last tick, so the reset comes
+/// 250–300 ms after it (with [`WATCHDOG_TIMEOUT_US`]; a little more on a slow LSI).
+///
+/// Spawn it on the thread-mode executor after the schedulers (a bus whose scheduler starts
+/// more than a look later counts as stopped), with the watchdog made from `p.IWDG` and a
+/// timeout of several looks ([`WATCHDOG_TIMEOUT_US`]). Blocking work in thread mode longer
+/// than the timeout less a look (a flash erase, a busy-wait calibration) resets the board:
+/// do it before spawning this task. A `tick_period` longer than a look never feeds it. The
+/// task also freezes the IWDG while a debugger halts the core (DBGMCU), so breakpoints do
+/// not reset the board.
 #[embassy_executor::task]
 pub async fn watchdog_task(
     mut watchdog: IndependentWatchdog<'static, IWDG>,

@@ -192,6 +192,22 @@ pub fn run_observed(
         }
         let t_ms = t / 1000;
 
+        if !rx_stalled(scenario, t_ms)
+            && let Some(drained) = rx.drain()
+        {
+            // The receive path runs again: the receiver reports an overrun once if either
+            // FIFO lost frames, then reads what the FIFOs kept, before any frame that ends
+            // now (which lands behind them).
+            if drained.overrun {
+                rc10.record_receive_error(ReceiveError::Overrun);
+                observer.on_overrun_reported(t);
+            }
+            for frame in drained.frames {
+                let r = rc10.dispatch(&frame, Instant::from_micros(t));
+                observer.on_dispatch(t, &frame, r);
+            }
+        }
+
         // A frame ends on the wire: faults, then delivery to everyone but its sender.
         if let Some((sender, frame, mcu_seq)) = bus.complete_with_seq(t) {
             let (received, corrupted) =
@@ -233,20 +249,6 @@ pub fn run_observed(
                         }
                     }
                 }
-            }
-        }
-        if !rx_stalled(scenario, t_ms)
-            && let Some(drained) = rx.drain()
-        {
-            // The receive path runs again: the receiver reports an overrun once if either
-            // FIFO lost frames, then reads what the FIFOs kept.
-            if drained.overrun {
-                rc10.record_receive_error(ReceiveError::Overrun);
-                observer.on_overrun_reported(t);
-            }
-            for frame in drained.frames {
-                let r = rc10.dispatch(&frame, Instant::from_micros(t));
-                observer.on_dispatch(t, &frame, r);
             }
         }
         while let Some(&(d, frame)) = delayed.front() {

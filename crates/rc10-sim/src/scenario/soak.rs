@@ -459,8 +459,11 @@ pub struct GroundTruth {
     pub dropped_no_ack: u64,
     /// Device frames dropped because their RX FIFO was full.
     pub overruns: u64,
-    /// Overruns the receive path reported to rc10 (one per stall that lost frames).
+    /// Overruns the simulated receive path reported to rc10.
     pub overrun_reports: u64,
+    /// Receive-path stalls (merged windows) that lost frames to full FIFOs and ended before
+    /// the run did: the overruns rc10-stm32's receiver would report, one each.
+    pub stalls_that_lost: u64,
     /// Device frames the controller's acceptance filters discarded.
     pub filtered: u64,
     /// Entries into bus-off seen at ticks.
@@ -565,6 +568,9 @@ pub struct SoakObserver {
     detail: Vec<(u64, u64)>,
     detail_next: usize,
     thin: bool,
+    /// The receive-path stalls (merged, ms) and whether each lost a frame.
+    rx_stalls: Vec<((u64, u64), bool)>,
+    duration_ms: u64,
 }
 
 fn bit(i: usize) -> u64 {
@@ -609,6 +615,19 @@ impl SoakObserver {
             detail,
             detail_next: 0,
             thin: scenario.duration_ms > FULL_TRACE_MS,
+            rx_stalls: merged(
+                scenario
+                    .faults
+                    .iter()
+                    .filter(|f| matches!(f, Fault::RxStall { .. }))
+                    .filter_map(window_of)
+                    .collect(),
+                scenario.duration_ms,
+            )
+            .into_iter()
+            .map(|w| (w, false))
+            .collect(),
+            duration_ms: scenario.duration_ms,
         }
     }
 
@@ -622,6 +641,12 @@ impl SoakObserver {
             self.record.truth.refused_bus_off = r.bus.mcu_tx_bus_off;
             self.record.truth.refused_full = r.bus.mcu_tx_full;
         }
+        // A stall that lasts to the end of the run never hands its overrun to rc10.
+        self.record.truth.stalls_that_lost = self
+            .rx_stalls
+            .iter()
+            .filter(|&&((_, to), lost)| lost && to < self.duration_ms)
+            .count() as u64;
         self.record
     }
 
@@ -740,12 +765,22 @@ impl RunObserver for SoakObserver {
         }
     }
 
-    fn on_rx_dropped(&mut self, _t_us: u64, frame: &CanFrame, why: RxDrop) {
+    fn on_rx_dropped(&mut self, t_us: u64, frame: &CanFrame, why: RxDrop) {
         let t = &mut self.record.truth;
         match why {
             RxDrop::BusOff => t.dropped_bus_off += 1,
             RxDrop::NoAck => t.dropped_no_ack += 1,
-            RxDrop::Overrun => t.overruns += 1,
+            RxDrop::Overrun => {
+                t.overruns += 1;
+                let t_ms = t_us / 1000;
+                if let Some((_, lost)) = self
+                    .rx_stalls
+                    .iter_mut()
+                    .find(|((from, to), _)| (*from..*to).contains(&t_ms))
+                {
+                    *lost = true;
+                }
+            }
             RxDrop::Filtered => t.filtered += 1,
         }
         if let Some(n) = self.corrupted_in_flight.get_mut(frame) {
@@ -1616,7 +1651,7 @@ fn statistics(scenario: &Scenario, record: &SoakRecord, limits: &[MotorLimits]) 
             &mut ok,
             "RX stall -> rx_overruns (stalls that lost frames)",
             c.rx_overruns.into(),
-            t.overrun_reports,
+            t.stalls_that_lost,
             rx_stall,
         ),
         stat_line(
@@ -2203,7 +2238,7 @@ mod tests {
         // Injected but counted by neither side is still a failure.
         let neither = failed_after(|r| {
             r.counters.rx_overruns = 0;
-            r.truth.overrun_reports = 0;
+            r.truth.stalls_that_lost = 0;
         });
         assert_eq!(neither, vec![CheckId::Statistics]);
     }
@@ -2346,6 +2381,24 @@ mod tests {
         );
         assert_eq!(r.ticks.bursts.first, vec![(1_100, 100)]);
         assert_eq!(r.ticks.run, 4);
+    }
+
+    #[test]
+    fn each_stall_that_lost_frames_and_ended_expects_one_overrun() {
+        let mut s = two_wheels();
+        // 1 000 ms run: stalls at 100–110 (loses), 200–210 (loses nothing), 300–305 and
+        // 303–320 (one stall, loses), 990–1 000 (loses, never ends within the run).
+        s.faults = [(100, 110), (200, 210), (300, 305), (303, 320), (990, 1_000)]
+            .into_iter()
+            .map(|(from_ms, to_ms)| Fault::RxStall { from_ms, to_ms })
+            .collect();
+        let mut obs = SoakObserver::new(&s);
+        let frame = CanFrame::standard(0x201, &[0; 8]).unwrap();
+        for t_ms in [105, 106, 318, 995] {
+            obs.on_rx_dropped(t_ms * 1000, &frame, RxDrop::Overrun);
+        }
+        let t = obs.finish(None, None).truth;
+        assert_eq!((t.overruns, t.stalls_that_lost), (4, 2));
     }
 
     #[test]
