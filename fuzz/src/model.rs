@@ -417,14 +417,12 @@ impl<'a> Harness<'a> {
                         None
                     };
                     t.offline_ticks = if state.online { 0 } else { t.offline_ticks + 1 };
-                    let probe = !state.online && t.offline_ticks % u32::from(dm::PROBE_TICKS) == 0;
                     check_dm(
                         &frames,
                         &info,
                         &state,
                         d.status(),
                         special,
-                        probe,
                         &self.track[i],
                         i,
                     );
@@ -706,7 +704,6 @@ fn check_dm(
     s: &MotorState,
     status: DmStatus,
     special: Option<DmSpecial>,
-    probe: bool,
     t: &Track,
     i: usize,
 ) {
@@ -728,15 +725,17 @@ fn check_dm(
         assert!(s.command.abs() <= l.t_max_nm, "{}", ctx());
     }
     // A special command is sent when asked for, or (auto-enable, a mode set) while the motor
-    // reports Disabled or, offline, as a probe; otherwise an MIT command, which must not look
-    // like one.
-    let auto = info.auto_enable
-        && s.mode != ControlMode::Disabled
-        && if s.online {
-            status == DmStatus::Disabled
-        } else {
-            probe
-        };
+    // reports Disabled or, offline, as a probe (also for an Enable waiting); otherwise an MIT
+    // command, which must not look like one.
+    // The driver's Enable probe: every PROBE_TICKS-th tick of an outage.
+    let probe = !s.online && t.offline_ticks.is_multiple_of(u32::from(dm::PROBE_TICKS));
+    let auto = if s.online {
+        info.auto_enable && s.mode != ControlMode::Disabled && status == DmStatus::Disabled
+    } else {
+        probe
+            && ((info.auto_enable && s.mode != ControlMode::Disabled)
+                || t.special.contains(&DmSpecial::Enable))
+    };
     let expected_special = special.or(auto.then_some(DmSpecial::Enable));
     if let Some(sp) = expected_special {
         assert_eq!(d, sp.bytes(), "expected {sp:?}: {}", ctx());

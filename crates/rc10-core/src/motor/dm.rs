@@ -52,6 +52,11 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 /// others.
 pub const PROBE_TICKS: u8 = 10;
 
+/// How far past ±`p_max` (relative) a total-angle target's position field may round and
+/// still count as in reach (then clamped to the range end when packed): the degree check
+/// made when the target is set and the radian field differ by a few f32 steps.
+const REACH_TOLERANCE: f32 = 1.0e-5;
+
 /// Largest MIT position gain (fixed by the protocol).
 pub const KP_MAX: f32 = 500.0;
 /// Largest MIT velocity gain (fixed by the protocol).
@@ -357,6 +362,9 @@ struct DmState {
     pending_home_deg: Option<f32>,
     /// Ticks without feedback until the next Enable probe (auto-enable).
     probe_in: u8,
+    /// The position field (the motor's own frame, rad) held while the total-angle target is
+    /// out of reach: the position when it went out of reach.
+    hold_rad: Option<f32>,
     torque_ff_nm: f32,
     out: [u8; 8],
 }
@@ -434,6 +442,7 @@ impl DmMotor {
                 home_offset_rad: 0.0,
                 pending_home_deg: None,
                 probe_in: PROBE_TICKS - 1,
+                hold_rad: None,
                 torque_ff_nm: 0.0,
                 out: [0; 8],
             })),
@@ -472,7 +481,9 @@ impl DmMotor {
     /// tick's MIT command: one special a tick, in the order asked for (`ClearError` then
     /// `Enable` sends FB, then FC). A kind asked for again while it still waits keeps its
     /// place, so at most the four kinds wait, none is dropped and none is starved. While the
-    /// motor is offline the specials wait (sent into silence they would be lost).
+    /// motor is offline the specials wait (sent into silence they would be lost), but a
+    /// waiting `Enable` also goes out as a probe on every [`PROBE_TICKS`]-th tick, for a
+    /// motor that answers only once enabled (without auto-enable it could not come back).
     ///
     /// - `Disable` also disables the driver (as [`Motor::disable`]): auto-enable does not
     ///   bring the motor back into motor mode until a new target is set.
@@ -562,13 +573,11 @@ impl DmMotor {
                     // Checked against the range when set. Out of it now (a return under
                     // `Restart`, a saved zero, the joint pushed across the range end), the
                     // field would be clamped to the range end: a place that is neither the
-                    // target nor here. The motor holds where it is instead.
-                    let field = deg_to_rad(s.target) - s.frame_offset_rad(p_max);
-                    if field.abs() <= p_max {
-                        field
-                    } else {
-                        motor_now
-                    }
+                    // target nor here. The motor holds where it was when the target went out
+                    // of reach instead (`update` keeps that position).
+                    self.total_angle_field_rad(s)
+                        .or(s.hold_rad)
+                        .unwrap_or(motor_now)
                 };
                 MitCommand {
                     position_rad,
@@ -579,6 +588,15 @@ impl DmMotor {
                 }
             }
         }
+    }
+
+    /// The MIT position field for the total-angle target, rad, if it is within the field's
+    /// ±`p_max` (give or take rounding: a target set at the end of
+    /// [`total_angle_range_deg`](Self::total_angle_range_deg) is in reach).
+    fn total_angle_field_rad(&self, s: &DmState) -> Option<f32> {
+        let p_max = self.config.limits.p_max_rad;
+        let field = deg_to_rad(s.target) - s.frame_offset_rad(p_max);
+        (field.abs() <= p_max * (1.0 + REACH_TOLERANCE)).then_some(field)
     }
 
     /// The multi-turn output angles, in degrees, that a total-angle target can have now: the
@@ -669,6 +687,7 @@ impl CanNode for DmMotor {
                     s.wraps = 0;
                     s.home_offset_rad = 0.0;
                     s.position_rad = None;
+                    s.hold_rad = None;
                 }
             }
             // Against a live reading only: the one before an outage may be stale (the joint
@@ -683,6 +702,17 @@ impl CanNode for DmMotor {
                 s.home_offset_rad = deg_to_rad(deg) - s.total_position_rad(p_max);
                 s.pending_home_deg = None;
             }
+            // The hold of an out-of-reach total-angle target: the position where it went out
+            // of reach, kept while it stays out (a new target, a return, another mode or a
+            // saved zero ends it).
+            s.hold_rad = if online && s.mode == ControlMode::TotalAngle {
+                match self.total_angle_field_rad(&s) {
+                    Some(_) => None,
+                    None => s.hold_rad.or(s.position_rad),
+                }
+            } else {
+                None
+            };
             let mit = if online {
                 self.mit_for(&s)
             } else {
@@ -695,17 +725,20 @@ impl CanNode for DmMotor {
                 // No torque is commanded on this tick.
                 s.torque_ff_nm = 0.0;
                 special.bytes()
-            } else if self.config.auto_enable
-                && s.mode != ControlMode::Disabled
-                && if online {
-                    s.status == DmStatus::Disabled
-                } else {
-                    probe
-                }
-            {
-                // Online and reporting Disabled, or silent (not yet answered, or gone): a
-                // motor that answers only in motor mode, or rebooted into Disabled, is
-                // brought back. A silent motor gets zero torque between the probes.
+            } else if if online {
+                self.config.auto_enable
+                    && s.mode != ControlMode::Disabled
+                    && s.status == DmStatus::Disabled
+            } else {
+                probe
+                    && ((self.config.auto_enable && s.mode != ControlMode::Disabled)
+                        || s.pending.contains(&DmSpecial::Enable))
+            } {
+                // Online and reporting Disabled (auto-enable), or silent (not yet answered,
+                // or gone) with auto-enable or an Enable waiting: a motor that answers only
+                // in motor mode, or rebooted into Disabled, is brought back. A silent motor
+                // gets zero torque between the probes; a waiting Enable still goes out once
+                // it answers.
                 s.torque_ff_nm = 0.0;
                 DmSpecial::Enable.bytes()
             } else {
@@ -1200,7 +1233,7 @@ mod tests {
         let mut sent = Vec::new();
         for _ in 0..20 {
             sent.push(packed(&m, t));
-            t = t + crate::time::Duration::from_millis(1);
+            t += crate::time::Duration::from_millis(1);
         }
         assert!(!m.is_online());
         for (i, bytes) in sent.iter().enumerate() {
@@ -1222,7 +1255,7 @@ mod tests {
     }
 
     #[test]
-    fn without_auto_enable_a_silent_motor_gets_zero_torque_only() {
+    fn without_auto_enable_a_silent_motor_is_probed_only_for_an_enable_asked_for() {
         let mut cfg = DmConfig::new(0x11);
         cfg.auto_enable = false;
         let m = DmMotor::new(0x01, cfg).unwrap();
@@ -1230,6 +1263,24 @@ mod tests {
         for _ in 0..3 * PROBE_TICKS {
             assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
         }
+        // The user asks for Enable: it goes out as a probe every 10th tick while the motor
+        // is silent, and once more when it answers.
+        m.send_special(DmSpecial::Enable);
+        for i in 1..=2 * PROBE_TICKS {
+            let want = if i % PROBE_TICKS == 0 {
+                DmSpecial::Enable.bytes()
+            } else {
+                ZERO_TORQUE_BYTES
+            };
+            assert_eq!(packed(&m, T0), want, "tick {i}");
+        }
+        m.update_feedback(&feedback(0, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        assert_eq!(packed(&m, T0), DmSpecial::Enable.bytes());
+        // Sent: no more Enables; still Disabled, so no torque either (no auto-enable).
+        m.update_feedback(&feedback(0, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        assert_ne!(packed(&m, T0), DmSpecial::Enable.bytes());
     }
 
     #[test]
@@ -1277,10 +1328,67 @@ mod tests {
         // Held where it is (clamped, the field was 12.5 rad: 13.8 rad, 2.2 turns, away).
         assert!((p + 1.27).abs() < 2e-3, "p = {p}");
         assert_eq!(m.state().target, 1000.0);
+        // A load pulls the joint down: the hold stays at -1.27 rad and pulls it back (it does
+        // not follow the joint down).
+        for sagged in [-1.4, -1.6, -1.8] {
+            m.update_feedback(
+                &feedback(1, 1, position_code(sagged), 0x7FF, 0x7FF, 30, 30),
+                t,
+            )
+            .unwrap();
+            let p = packed_position_rad(&packed(&m, t));
+            assert!((p + 1.27).abs() < 2e-3, "at {sagged}: p = {p}");
+        }
+        // Another outage: the joint fell to -2.0 rad meanwhile. The hold starts again from
+        // where it is back, not from where it was held before.
+        let later = t + crate::time::Duration::from_millis(150);
+        packed(&m, later);
+        assert!(!m.is_online());
+        m.update_feedback(
+            &feedback(1, 1, position_code(-2.0), 0x7FF, 0x7FF, 30, 30),
+            later,
+        )
+        .unwrap();
+        let p = packed_position_rad(&packed(&m, later));
+        assert!((p + 2.0).abs() < 2e-3, "after the return: p = {p}");
         // A target set again within reach is followed.
         m.set_target_total_angle_deg(90.0).unwrap();
-        let p = packed_position_rad(&packed(&m, t));
+        let p = packed_position_rad(&packed(&m, later));
         assert!((p - deg_to_rad(90.0)).abs() < 2e-3, "p = {p}");
+    }
+
+    #[test]
+    fn a_total_angle_target_just_out_of_reach_holds_too() {
+        // One wrap forward (range 12.5–37.5 rad), the target 13.0 rad, then a Restart
+        // return at 0.2 rad: the field would be 13.0, half a radian past +12.5.
+        let m = wrapped_then_offline(MultiTurnOnReturn::Restart);
+        m.set_target_total_angle_deg(rad_to_deg(13.0)).unwrap();
+        let t = Instant::from_millis(160);
+        m.update_feedback(&feedback(1, 1, position_code(0.2), 0x7FF, 0x7FF, 30, 30), t)
+            .unwrap();
+        let p = packed_position_rad(&packed(&m, t));
+        assert!((p - 0.2).abs() < 2e-3, "p = {p}");
+    }
+
+    #[test]
+    fn a_total_angle_target_at_the_end_of_the_reported_range_is_reached() {
+        // One wrap forward: the range is 12.5–37.5 rad. Its ends, as the driver reports them,
+        // go to the field's ends (±12.5 rad in the motor's frame), not into a hold.
+        let m = wrapped_then_offline(MultiTurnOnReturn::Continue);
+        let t = Instant::from_millis(160);
+        // Back close to where it was (-12.496 rad): the wrap stays.
+        m.update_feedback(
+            &feedback(1, 1, position_code(-12.0), 0x7FF, 0x7FF, 30, 30),
+            t,
+        )
+        .unwrap();
+        let (low, high) = m.total_angle_range_deg();
+        assert!((low - rad_to_deg(12.5)).abs() < 0.01, "{low}");
+        for (end, field) in [(low, -12.5), (high, 12.5)] {
+            m.set_target_total_angle_deg(end).unwrap();
+            let p = packed_position_rad(&packed(&m, t));
+            assert!((p - field).abs() < 2e-3, "end {end}: p = {p}");
+        }
     }
 
     #[test]

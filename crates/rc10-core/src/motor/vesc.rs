@@ -353,8 +353,10 @@ impl VescMotor {
         self.set(ControlMode::Voltage, duty, Some(duty), None)
     }
 
-    /// Commands a brake current in amps (taken by magnitude, clamped to the brake limit);
-    /// `state().target` reads its magnitude.
+    /// Commands a brake current in amps (taken by magnitude, clamped to the brake limit).
+    /// `state()` then reads mode `Current` with the magnitude as its target, as a drive
+    /// current would: [`last_command`](Self::last_command) tells a brake
+    /// ([`VescCommand::Brake`]) from a drive.
     pub fn set_brake_current(&self, amps: f32) -> Result<(), TargetError> {
         self.set(ControlMode::Current, amps.abs(), None, Some(amps))
     }
