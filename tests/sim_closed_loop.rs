@@ -9,11 +9,12 @@ use rc10_core::motor::dji::DjiModel;
 use rc10_sim::metrics::min_speed_rise_time_s;
 use rc10_sim::plant::{Load, MotorParams};
 use rc10_sim::scenario::{
-    Controller, MotorSpec, RunResult, Scenario, SimError, TargetKind, TargetSpec, builtin, run,
+    Controller, MotorSpec, RunResult, Scenario, SimError, TargetKind, TargetSpec, builtin_named,
+    run,
 };
 
 fn scenario(name: &str) -> Scenario {
-    builtin().into_iter().find(|s| s.name == name).unwrap()
+    builtin_named(name).unwrap()
 }
 
 fn motor_series(r: &RunResult, motor: usize) -> Vec<(u64, rc10_sim::scenario::MotorSample)> {

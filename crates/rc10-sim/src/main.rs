@@ -4,7 +4,7 @@
 use clap::{Parser, Subcommand};
 use rc10_sim::metrics::min_speed_rise_time_s;
 use rc10_sim::plant::MotorParams;
-use rc10_sim::scenario::{Scenario, TargetKind, builtin, run_with_progress, soak};
+use rc10_sim::scenario::{Scenario, TargetKind, builtin, builtin_named, run_with_progress, soak};
 use rc10_sim::{output, scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -60,13 +60,10 @@ fn find(name: &str) -> Result<Scenario, String> {
     if name.ends_with(".toml") || path.is_file() {
         return rc10_sim::file::load(path).map_err(|e| format!("{}: {e}", path.display()));
     }
-    builtin()
-        .into_iter()
-        .find(|s| s.name == name)
-        .ok_or_else(|| {
-            let names: Vec<String> = builtin().into_iter().map(|s| s.name).collect();
-            format!("no scenario named `{name}`; built-in: {}", names.join(", "))
-        })
+    builtin_named(name).ok_or_else(|| {
+        let names: Vec<String> = builtin().into_iter().map(|s| s.name).collect();
+        format!("no scenario named `{name}`; built-in: {}", names.join(", "))
+    })
 }
 
 fn run_cmd(args: RunArgs) -> Result<(), String> {

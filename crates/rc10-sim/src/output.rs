@@ -529,7 +529,7 @@ pub fn write_all(
 mod tests {
     use super::{push_digits, push_fixed, write_svg};
     use crate::scenario::run::uniform;
-    use crate::scenario::{TargetKind, TargetSpec, builtin, run};
+    use crate::scenario::{TargetKind, TargetSpec, builtin_named, run};
     use rand_xoshiro::Xoshiro256PlusPlus;
     use rand_xoshiro::rand_core::SeedableRng;
 
@@ -642,10 +642,7 @@ mod tests {
 
     #[test]
     fn a_plot_of_angle_and_speed_motors_names_each_ones_unit() {
-        let mut s = builtin()
-            .into_iter()
-            .find(|s| s.name == "fault-power-cut")
-            .unwrap();
+        let mut s = builtin_named("fault-power-cut").unwrap();
         s.faults.clear();
         s.duration_ms = 50;
         s.targets = vec![

@@ -537,7 +537,10 @@ impl DmMotor {
         Ok(())
     }
 
-    fn mit_for(&self, s: &DmState) -> MitCommand {
+    /// The MIT command for the mode; `total_field_rad` is the total-angle target's position
+    /// field when it is in reach ([`total_angle_field_rad`](Self::total_angle_field_rad),
+    /// worked out once a tick by `update`).
+    fn mit_for(&self, s: &DmState, total_field_rad: Option<f32>) -> MitCommand {
         let c = &self.config;
         let p_max = c.limits.p_max_rad;
         match s.mode {
@@ -575,9 +578,7 @@ impl DmMotor {
                     // field would be clamped to the range end: a place that is neither the
                     // target nor here. The motor holds where it was when the target went out
                     // of reach instead (`update` keeps that position).
-                    self.total_angle_field_rad(s)
-                        .or(s.hold_rad)
-                        .unwrap_or(motor_now)
+                    total_field_rad.or(s.hold_rad).unwrap_or(motor_now)
                 };
                 MitCommand {
                     position_rad,
@@ -705,16 +706,15 @@ impl CanNode for DmMotor {
             // The hold of an out-of-reach total-angle target: the position where it went out
             // of reach, kept while it stays out (a new target, a return, another mode or a
             // saved zero ends it).
-            s.hold_rad = if online && s.mode == ControlMode::TotalAngle {
-                match self.total_angle_field_rad(&s) {
-                    Some(_) => None,
-                    None => s.hold_rad.or(s.position_rad),
-                }
+            let held = online && s.mode == ControlMode::TotalAngle;
+            let total_field_rad = held.then(|| self.total_angle_field_rad(&s)).flatten();
+            s.hold_rad = if held && total_field_rad.is_none() {
+                s.hold_rad.or(s.position_rad)
             } else {
                 None
             };
             let mit = if online {
-                self.mit_for(&s)
+                self.mit_for(&s, total_field_rad)
             } else {
                 MitCommand::ZERO_TORQUE
             };
@@ -1286,11 +1286,7 @@ mod tests {
     #[test]
     fn homing_asked_while_offline_waits_for_a_reading_after_the_return() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
-        m.update_feedback(
-            &feedback(1, 1, position_code(5.0), 0x7FF, 0x7FF, 30, 30),
-            T0,
-        )
-        .unwrap();
+        report_position(&m, 5.0, T0);
         let later = T0 + crate::time::Duration::from_millis(150);
         packed(&m, later);
         assert!(!m.is_online());
@@ -1298,11 +1294,7 @@ mod tests {
         m.set_total_angle_here_deg(0.0).unwrap();
         packed(&m, later);
         // Back at 0.3 rad (the joint sagged meanwhile): that is where 0 is.
-        m.update_feedback(
-            &feedback(1, 1, position_code(0.3), 0x7FF, 0x7FF, 30, 30),
-            later,
-        )
-        .unwrap();
+        report_position(&m, 0.3, later);
         packed(&m, later);
         assert!(
             m.total_angle_deg().unwrap().abs() < 0.01,
@@ -1319,11 +1311,7 @@ mod tests {
         m.set_target_total_angle_deg(1000.0).unwrap();
         // Power-cycled: back at -1.27 rad with no wraps. 17.45 rad is now beyond +12.5.
         let t = Instant::from_millis(160);
-        m.update_feedback(
-            &feedback(1, 1, position_code(-1.27), 0x7FF, 0x7FF, 30, 30),
-            t,
-        )
-        .unwrap();
+        report_position(&m, -1.27, t);
         let p = packed_position_rad(&packed(&m, t));
         // Held where it is (clamped, the field was 12.5 rad: 13.8 rad, 2.2 turns, away).
         assert!((p + 1.27).abs() < 2e-3, "p = {p}");
@@ -1331,11 +1319,7 @@ mod tests {
         // A load pulls the joint down: the hold stays at -1.27 rad and pulls it back (it does
         // not follow the joint down).
         for sagged in [-1.4, -1.6, -1.8] {
-            m.update_feedback(
-                &feedback(1, 1, position_code(sagged), 0x7FF, 0x7FF, 30, 30),
-                t,
-            )
-            .unwrap();
+            report_position(&m, sagged, t);
             let p = packed_position_rad(&packed(&m, t));
             assert!((p + 1.27).abs() < 2e-3, "at {sagged}: p = {p}");
         }
@@ -1344,11 +1328,7 @@ mod tests {
         let later = t + crate::time::Duration::from_millis(150);
         packed(&m, later);
         assert!(!m.is_online());
-        m.update_feedback(
-            &feedback(1, 1, position_code(-2.0), 0x7FF, 0x7FF, 30, 30),
-            later,
-        )
-        .unwrap();
+        report_position(&m, -2.0, later);
         let p = packed_position_rad(&packed(&m, later));
         assert!((p + 2.0).abs() < 2e-3, "after the return: p = {p}");
         // A target set again within reach is followed.
@@ -1364,8 +1344,7 @@ mod tests {
         let m = wrapped_then_offline(MultiTurnOnReturn::Restart);
         m.set_target_total_angle_deg(rad_to_deg(13.0)).unwrap();
         let t = Instant::from_millis(160);
-        m.update_feedback(&feedback(1, 1, position_code(0.2), 0x7FF, 0x7FF, 30, 30), t)
-            .unwrap();
+        report_position(&m, 0.2, t);
         let p = packed_position_rad(&packed(&m, t));
         assert!((p - 0.2).abs() < 2e-3, "p = {p}");
     }
@@ -1377,11 +1356,7 @@ mod tests {
         let m = wrapped_then_offline(MultiTurnOnReturn::Continue);
         let t = Instant::from_millis(160);
         // Back close to where it was (-12.496 rad): the wrap stays.
-        m.update_feedback(
-            &feedback(1, 1, position_code(-12.0), 0x7FF, 0x7FF, 30, 30),
-            t,
-        )
-        .unwrap();
+        report_position(&m, -12.0, t);
         let (low, high) = m.total_angle_range_deg();
         assert!((low - rad_to_deg(12.5)).abs() < 0.01, "{low}");
         for (end, field) in [(low, -12.5), (high, 12.5)] {
@@ -1454,15 +1429,18 @@ mod tests {
         float_to_uint(rad, 12.5, 16) as u16
     }
 
+    /// Motor 1, enabled, reports `rad` (default range) at `t`; speed and torque codes at
+    /// their middle, 30 °C.
+    fn report_position(m: &DmMotor, rad: f32, t: Instant) {
+        m.update_feedback(&feedback(1, 1, position_code(rad), 0x7FF, 0x7FF, 30, 30), t)
+            .unwrap();
+    }
+
     #[test]
     fn angle_target_across_the_range_end_picks_the_equivalent_angle_inside() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
         // The motor reports 12.3 rad, near the +12.5 rad end of its position range.
-        m.update_feedback(
-            &feedback(1, 1, position_code(12.3), 0x7FF, 0x7FF, 30, 30),
-            T0,
-        )
-        .unwrap();
+        report_position(&m, 12.3, T0);
         let here_deg = m.angle_deg().unwrap();
         // 1 rad further on: the short way would be 13.3 rad, beyond the field's range (it
         // would park at 12.5). The same output angle a turn back, 13.3 - 2π = 7.017 rad, is
@@ -1471,11 +1449,7 @@ mod tests {
         let p = packed_position_rad(&packed(&m, T0));
         assert!((p - (12.3 + 1.0 - TAU)).abs() < 2e-3, "p = {p}");
         // And near the other end, the other way.
-        m.update_feedback(
-            &feedback(1, 1, position_code(-12.3), 0x7FF, 0x7FF, 30, 30),
-            T0,
-        )
-        .unwrap();
+        report_position(&m, -12.3, T0);
         let here_deg = m.angle_deg().unwrap();
         m.set_target_angle_deg(here_deg - rad_to_deg(1.0)).unwrap();
         let p = packed_position_rad(&packed(&m, T0));
@@ -1485,11 +1459,7 @@ mod tests {
     #[test]
     fn total_angle_target_beyond_the_position_range_is_rejected() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
-        m.update_feedback(
-            &feedback(1, 1, position_code(0.0), 0x7FF, 0x7FF, 30, 30),
-            T0,
-        )
-        .unwrap();
+        report_position(&m, 0.0, T0);
         m.set_target_total_angle_deg(700.0).unwrap(); // 12.22 rad: inside ±12.5
         let (low, high) = m.total_angle_range_deg();
         assert!((high - rad_to_deg(12.5)).abs() < 0.01 && (low + high).abs() < 0.01);
@@ -1549,11 +1519,7 @@ mod tests {
     #[test]
     fn homing_shifts_reported_angles_and_targets() {
         let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
-        m.update_feedback(
-            &feedback(1, 1, position_code(2.0), 0x7FF, 0x7FF, 30, 30),
-            T0,
-        )
-        .unwrap();
+        report_position(&m, 2.0, T0);
         m.set_total_angle_here_deg(0.0).unwrap();
         packed(&m, T0); // the tick applies it
         assert!(m.total_angle_deg().unwrap().abs() < 0.01);

@@ -16,6 +16,11 @@ fn m3508(esc_id: u8, controller: Controller) -> MotorSpec {
     }
 }
 
+/// The built-in scenario called `name`, if there is one.
+pub fn builtin_named(name: &str) -> Option<Scenario> {
+    builtin().into_iter().find(|s| s.name == name)
+}
+
 /// The built-in scenarios, the first being the default.
 pub fn builtin() -> Vec<Scenario> {
     let base = |name: &str, description: &str, duration_ms: u64| Scenario {

@@ -20,7 +20,7 @@ pub(crate) mod run;
 mod rx;
 pub mod soak;
 
-pub use builtin::builtin;
+pub use builtin::{builtin, builtin_named};
 pub use chassis_app::{ChassisDrive, ChassisSample};
 pub use faults::Fault;
 pub use metrics::TargetMetrics;

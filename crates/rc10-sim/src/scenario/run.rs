@@ -436,15 +436,12 @@ fn deliver(
 mod tests {
     use super::*;
     use crate::bus::TxOrder;
-    use crate::scenario::builtin;
+    use crate::scenario::{builtin, builtin_named};
 
     #[test]
     fn a_target_on_a_chassis_wheel_is_refused() {
         use crate::scenario::{TargetKind, TargetSpec};
-        let mut s = builtin()
-            .into_iter()
-            .find(|s| s.name == "chassis-remote-drive")
-            .unwrap();
+        let mut s = builtin_named("chassis-remote-drive").unwrap();
         s.duration_ms = 10;
         s.targets = vec![TargetSpec {
             motor: 3,

@@ -74,16 +74,15 @@ impl RxPath {
         let Some(f) = self.fifo_of(&frame) else {
             return Stored::Rejected;
         };
-        match (self.fifos.get_mut(f), self.lost.get_mut(f)) {
-            (Some(fifo), _) if fifo.len() < RX_FIFO_DEPTH => {
-                fifo.push_back(frame);
-                Stored::Queued
-            }
-            (_, Some(lost)) => {
-                *lost = true;
-                Stored::Lost
-            }
-            _ => Stored::Lost,
+        let (Some(fifo), Some(lost)) = (self.fifos.get_mut(f), self.lost.get_mut(f)) else {
+            return Stored::Rejected; // f is 0 or 1: unreachable
+        };
+        if fifo.len() < RX_FIFO_DEPTH {
+            fifo.push_back(frame);
+            Stored::Queued
+        } else {
+            *lost = true;
+            Stored::Lost
         }
     }
 
