@@ -428,6 +428,9 @@ impl Pid {
         // Finite error mean: a ki so small that it multiplies to 0 gives 0, not 0 · ∞ = NaN.
         let increment = self.config.ki * error_mean * dt_s;
         let candidate = clamp_abs(integral + increment, i_limit);
+        // The plain sum: should terms near ±f32::MAX cancel and a partial sum overflow, it
+        // errs towards holding the integral for the step, which is harmless at such values
+        // (the output itself is summed exactly, in `finish`).
         let unlimited = p + candidate + d + feed_forward;
         // Signs compared, not multiplied: a product of two tiny values underflows to 0.
         let growth = candidate - integral;
@@ -520,7 +523,7 @@ impl Pid {
         prev_error: Option<f32>,
         measurement: f32,
     ) -> f32 {
-        let output = clamp_abs(p + integral + d + feed_forward, out_limit);
+        let output = clamp_abs(sum_terms(p, integral, d, feed_forward), out_limit);
         self.integral = integral;
         self.prev_error = prev_error;
         self.prev_measurement = Some(measurement);
@@ -638,6 +641,22 @@ impl Pid {
         self.prev_measurement = None;
         self.d_filter.reset();
         self.last = PidTerms::ZERO;
+    }
+}
+
+/// `p + i + d + ff` of finite terms. Summed left to right as usual; should a partial sum
+/// overflow (terms near `±f32::MAX` of opposite signs, whose total may be small), summed
+/// again in quarters, which cannot overflow (scaling by 4 is exact for normal values): the
+/// result is then the true sum within a rounding of the largest term, as any f32 sum is,
+/// and infinite only when the true sum is beyond `f32::MAX`. One comparison on the usual
+/// path.
+#[inline(always)]
+fn sum_terms(p: f32, i: f32, d: f32, ff: f32) -> f32 {
+    let sum = p + i + d + ff;
+    if sum.is_finite() {
+        sum
+    } else {
+        ((p * 0.25 + i * 0.25) + (d * 0.25 + ff * 0.25)) * 4.0
     }
 }
 
@@ -884,6 +903,22 @@ mod tests {
             (d_filt2 + 1000.0 * 0.05912 * (1.0 - 0.05912)).abs() < 0.05,
             "{d_filt2}"
         );
+    }
+
+    #[test]
+    fn terms_near_f32_max_of_opposite_signs_sum_to_what_is_left() {
+        // P and D saturated at ±MAX cancel; the integral is what remains (left to right,
+        // MAX + 1e33 overflowed and the output read MAX). Found by the property test.
+        // Within a rounding of MAX/4 (2^101) in the quarter sum, times 4: 2^103 ≈ 1.0e31.
+        let left = sum_terms(f32::MAX, 1.0e33, -f32::MAX, 0.0);
+        assert!((left - 1.0e33).abs() <= 2f32.powi(103), "{left}");
+        assert_eq!(sum_terms(f32::MAX, f32::MAX, -f32::MAX, -f32::MAX), 0.0);
+        assert_eq!(sum_terms(f32::MAX, 0.0, -f32::MAX, 2.5), 2.5);
+        // Beyond MAX for real: infinite, which the output limit clamps.
+        assert_eq!(sum_terms(f32::MAX, f32::MAX, 0.0, 0.0), f32::INFINITY);
+        assert_eq!(sum_terms(-f32::MAX, -1.0e33, 0.0, 0.0), f32::NEG_INFINITY);
+        // The usual case, as summed.
+        assert_eq!(sum_terms(1.5, 0.25, -0.5, 2.0), 3.25);
     }
 
     #[test]
