@@ -91,6 +91,9 @@ pub struct SimBus {
     /// The controller's pending frames, each with its sequence number ([`SimBus::next_mcu_seq`]).
     mcu_tx: VecDeque<(u64, CanFrame)>,
     device_tx: Vec<VecDeque<CanFrame>>,
+    /// Frames waiting in all of `device_tx` (so an idle bus with nothing waiting is seen at
+    /// once: [`SimBus::start_next`] runs after every event).
+    device_waiting: usize,
     /// The frame on the wire: sender, frame, end time, and for a controller frame its sequence
     /// number.
     on_wire: Option<(Sender, CanFrame, u64, Option<u64>)>,
@@ -107,6 +110,7 @@ impl SimBus {
             config,
             mcu_tx: VecDeque::new(),
             device_tx: Vec::new(),
+            device_waiting: 0,
             on_wire: None,
             mcu_bus_off: false,
             mcu_no_ack: false,
@@ -140,7 +144,10 @@ impl SimBus {
     pub fn device_send(&mut self, index: usize, frame: CanFrame) {
         let depth = self.config.device_tx_depth;
         match self.device_tx.get_mut(index) {
-            Some(q) if q.len() < depth => q.push_back(frame),
+            Some(q) if q.len() < depth => {
+                q.push_back(frame);
+                self.device_waiting += 1;
+            }
             _ => self.stats.device_tx_dropped += 1,
         }
     }
@@ -149,6 +156,7 @@ impl SimBus {
     /// the wire breaks off (the bus is free at once; counted in `lost`).
     pub fn power_off_device(&mut self, index: usize) {
         if let Some(q) = self.device_tx.get_mut(index) {
+            self.device_waiting -= q.len();
             q.clear();
         }
         if matches!(self.on_wire, Some((Sender::Device(d), _, _, _)) if d == index) {
@@ -265,7 +273,7 @@ impl SimBus {
     /// one of its pending frames, chosen by [`SimBusConfig::mcu_tx_order`]; each device offers
     /// its oldest.
     pub fn start_next(&mut self, now_us: u64) {
-        if self.on_wire.is_some() {
+        if self.on_wire.is_some() || (self.device_waiting == 0 && self.mcu_tx.is_empty()) {
             return;
         }
         // The controller's offer first, then each device's: on equal keys the first stays.
@@ -292,11 +300,11 @@ impl SimBus {
                     }
                 })
                 .map(|(seq, f)| (f, Some(seq))),
-            Sender::Device(i) => self
-                .device_tx
-                .get_mut(i)
-                .and_then(VecDeque::pop_front)
-                .map(|f| (f, None)),
+            Sender::Device(i) => {
+                let popped = self.device_tx.get_mut(i).and_then(VecDeque::pop_front);
+                self.device_waiting -= usize::from(popped.is_some());
+                popped.map(|f| (f, None))
+            }
         };
         if let Some((frame, seq)) = frame {
             let duration = u64::from(timing::frame_time_us(&frame, self.config.bitrate_bps));

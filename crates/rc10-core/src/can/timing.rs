@@ -155,19 +155,17 @@ fn stuff_bits<const BYTES: usize>(bits: u128) -> u32 {
     let mut state = STUFF_START;
     let mut stuffed = 0u32;
     for &byte in bits.to_be_bytes().iter().take(BYTES) {
-        let byte = usize::from(byte);
-        let state_index = usize::from(state);
-        // A u8 row index into 256 rows, and a state below 16 into 16 columns: always
-        // present. The next state is the only value carried from byte to byte, one load.
-        let (Some(next), Some(count)) = (
-            STUFF_NEXT.get(byte).and_then(|row| row.get(state_index)),
-            STUFF_COUNT.get(byte).and_then(|row| row.get(state_index)),
-        ) else {
-            return stuffed;
-        };
-        state = *next;
-        // At most 4 per byte, 64 in all: no overflow.
-        stuffed = stuffed.saturating_add(u32::from(*count));
+        // A u8 row index into 256 rows, and a state masked below 16 into 16 columns: always
+        // present (the bounds checks fold away). The next state is the only value carried
+        // from byte to byte: one load and a mask.
+        let entry = STUFF
+            .get(usize::from(byte))
+            .and_then(|row| row.get(usize::from(state & STUFF_STATE_MASK)))
+            .copied()
+            .unwrap_or(0);
+        state = entry & STUFF_STATE_MASK;
+        // At most 2 per byte, 30 in all: no overflow.
+        stuffed = stuffed.wrapping_add(u32::from(entry >> 4));
     }
     stuffed
 }
@@ -247,28 +245,29 @@ const fn stuff_byte(state: u8, byte: u8) -> (u8, u8) {
     (s, stuffed)
 }
 
-/// For each byte and state: the state after the byte, and the stuff bits inserted while
-/// sending it (0–2). Indexed `[byte][state]` so that the chain from one byte to the next is a
-/// single load (the row address does not depend on the state).
+/// The low four bits of a [`STUFF`] entry: the state after the byte.
+const STUFF_STATE_MASK: u8 = 0xF;
+
+/// For each byte and state: the state after the byte in the low four bits, and the stuff
+/// bits inserted while sending it (0–2) in the high four. Indexed `[byte][state]` so that the
+/// chain from one byte to the next is a single load (the row address does not depend on the
+/// state).
 // Built at compile time: an out-of-bounds index would fail the build, not panic at run time.
 #[allow(clippy::indexing_slicing)]
-const STUFF_TABLES: ([[u8; 16]; 256], [[u8; 16]; 256]) = {
-    let (mut next, mut count) = ([[0u8; 16]; 256], [[0u8; 16]; 256]);
+const STUFF: [[u8; 16]; 256] = {
+    let mut table = [[0u8; 16]; 256];
     let mut byte = 0;
     while byte < 256 {
         let mut state = 0;
         while state < 16 {
-            (next[byte][state], count[byte][state]) = stuff_byte(state as u8, byte as u8);
+            let (next, count) = stuff_byte(state as u8, byte as u8);
+            table[byte][state] = count << 4 | next;
             state += 1;
         }
         byte += 1;
     }
-    (next, count)
+    table
 };
-/// The state after each byte from each state (see [`STUFF_TABLES`]).
-const STUFF_NEXT: [[u8; 16]; 256] = STUFF_TABLES.0;
-/// The stuff bits each byte gets from each state (see [`STUFF_TABLES`]).
-const STUFF_COUNT: [[u8; 16]; 256] = STUFF_TABLES.1;
 
 #[cfg(test)]
 mod tests {
