@@ -101,8 +101,27 @@ pub fn run_stream<F, const N: usize>(
     let shared: Shared<FrameReceiver<F, N>> =
         Shared::new(FrameReceiver::new(Duration::from_micros(TIMEOUT_US)));
     let mut oracle = LinkOracle::<F>::new();
-    let mut history: Vec<(u64, u8)> = Vec::new();
+    let mut framing = Framing::<N>::default();
     let mut now: u64 = 1_000_000;
+    let settle = |oracle: &mut LinkOracle<F>, result: Result<F, F::Error>, bytes: &[u8], at: u64| {
+        let expected = parse(bytes);
+        match (&result, expected) {
+            (Ok(f), Some(e)) => {
+                assert_eq!(*f, e, "frame {bytes:02X?} decoded wrongly");
+                check_frame(f);
+                if failsafe(f) {
+                    oracle.failsafe(at);
+                } else if f.frame_lost() {
+                    oracle.hold(*f);
+                } else {
+                    oracle.accept(*f, at);
+                }
+            }
+            (Err(_), None) => {}
+            (r, e) => panic!("frame {bytes:02X?}: parser says {r:?}, protocol says {e:?}"),
+        }
+        assert_eq!(F::parse(bytes), result, "stream and whole-frame parse differ");
+    };
     while !u.is_empty() {
         let Ok(ctl) = u8::arbitrary(&mut u) else {
             break;
@@ -134,55 +153,68 @@ pub fn run_stream<F, const N: usize>(
             0xFF => {
                 let later =
                     now.saturating_add(u64::from(u8::arbitrary(&mut u).unwrap_or(0)) * 1000);
-                check_signal(&rx, &oracle, later, neutral);
+                if let Some((bytes, at)) = framing.due_by(later) {
+                    let result = rx.poll(Instant::from_ticks(later));
+                    let result = result.expect("N bytes between two silences not taken as a frame");
+                    settle(&mut oracle, result, &bytes, at);
+                }
+                assert!(rx.poll(Instant::from_ticks(later)).is_none(), "a frame the protocol does not frame");
+                check_signal(&mut rx, &oracle, later, neutral);
                 continue;
             }
         }
         let Ok(byte) = u8::arbitrary(&mut u) else {
             break;
         };
-        history.push((now, byte));
-        let result = rx.push_byte(byte, Instant::from_ticks(now));
-        if let Some(result) = result {
-            // A completed frame is the last N bytes, none of them after a gap.
-            assert!(history.len() >= N, "a frame from {} bytes", history.len());
-            let tail = &history[history.len() - N..];
-            for w in tail.windows(2) {
-                let (a, b) = (w[0].0, w[1].0);
-                assert!(
-                    b >= a && b - a <= GAP_US,
-                    "a frame across a gap: {a} µs → {b} µs"
-                );
-            }
-            let bytes: Vec<u8> = tail.iter().map(|(_, b)| *b).collect();
-            let expected = parse(&bytes);
-            match (&result, expected) {
-                (Ok(f), Some(e)) => {
-                    assert_eq!(*f, e, "frame {bytes:02X?} decoded wrongly");
-                    check_frame(f);
-                    if failsafe(f) {
-                        oracle.failsafe(now);
-                    } else if f.frame_lost() {
-                        oracle.hold(*f);
-                    } else {
-                        oracle.accept(*f, now);
-                    }
-                }
-                (Err(_), None) => {}
-                (r, e) => panic!("frame {bytes:02X?}: parser says {r:?}, protocol says {e:?}"),
-            }
-            assert_eq!(
-                F::parse(&bytes),
-                result,
-                "stream and whole-frame parse differ"
-            );
+        let due = framing.push(byte, now);
+        match (rx.push_byte(byte, Instant::from_ticks(now)), due) {
+            (Some(result), Some((bytes, at))) => settle(&mut oracle, result, &bytes, at),
+            (None, None) => {}
+            (r, d) => panic!("push_byte gave {r:?}; the protocol's framing gives {d:02X?}"),
         }
-        check_signal(&rx, &oracle, now, neutral);
+        check_signal(&mut rx, &oracle, now, neutral);
+    }
+}
+
+/// The framing rule from the protocol: a frame is exactly `N` bytes between two silences
+/// longer than the frame gap (time going backwards counts as one).
+#[derive(Debug, Default)]
+struct Framing<const N: usize> {
+    /// The bytes since the last silence (or since the last frame was taken).
+    burst: Vec<u8>,
+    /// When the last byte came.
+    last: Option<u64>,
+}
+
+impl<const N: usize> Framing<N> {
+    /// A byte at `now`: the frame its silence proves whole, if any, with its last byte's time.
+    fn push(&mut self, byte: u8, now: u64) -> Option<(Vec<u8>, u64)> {
+        let after_gap = self.last.is_none_or(|t| now < t || now - t > GAP_US);
+        let mut due = None;
+        if after_gap {
+            if self.burst.len() == N {
+                due = self.last.map(|t| (std::mem::take(&mut self.burst), t));
+            }
+            self.burst.clear();
+        }
+        self.burst.push(byte);
+        self.last = Some(now);
+        due
+    }
+
+    /// The frame that the silence up to `now` proves whole, if any (taken once).
+    fn due_by(&mut self, now: u64) -> Option<(Vec<u8>, u64)> {
+        let t = self.last?;
+        if self.burst.len() == N && now >= t && now - t > GAP_US {
+            Some((std::mem::take(&mut self.burst), t))
+        } else {
+            None
+        }
     }
 }
 
 fn check_signal<F, const N: usize>(
-    rx: &FrameReceiver<F, N>,
+    rx: &mut FrameReceiver<F, N>,
     oracle: &LinkOracle<F>,
     now: u64,
     neutral: F,

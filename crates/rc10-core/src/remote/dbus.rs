@@ -340,9 +340,43 @@ mod tests {
             }
             t += 12_000; // the gap between frames
         }
+        // The last frame is proven whole by the silence after it.
+        if let Some(Ok(_)) = rx.poll(Instant::from_micros(t)) {
+            decoded += 1;
+        }
         assert_eq!(decoded, 4);
         assert_eq!(rx.link().errors(), 1);
         assert!((rx.signal(Instant::from_micros(t)).value.stick(0, 0.0) - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_byte_that_creeps_into_a_frame_drops_it_instead_of_shifting_it() {
+        // Line noise adds 0xFF before byte 14 of a neutral frame. Read as the first 18 bytes,
+        // the keyboard (bytes 14–15) would say 0x00FF: W, S, A, D, Shift, Ctrl, Q, E held.
+        let mut rx = DbusReceiver::new(Duration::from_millis(100));
+        let frame = encode([1024; 4], 3, 3, [0; 3], 0);
+        let mut burst = frame.to_vec();
+        burst.insert(14, 0xFF);
+        let mut t = 1_000u64;
+        for byte in &burst {
+            t += 110;
+            assert!(rx.push_byte(*byte, Instant::from_micros(t)).is_none());
+        }
+        let quiet = Instant::from_micros(t + 12_000);
+        assert!(rx.poll(quiet).is_none());
+        let s = rx.signal(quiet);
+        assert!(s.lost);
+        assert_eq!(s.value.keys, Keys(0));
+        assert_eq!((rx.link().frames(), rx.link().errors()), (0, 1));
+        // The next clean frame, 14 ms after the burst began, is read.
+        t += 12_000;
+        for byte in &frame {
+            t += 110;
+            assert!(rx.push_byte(*byte, Instant::from_micros(t)).is_none());
+        }
+        let s = rx.signal(Instant::from_micros(t + 2_501));
+        assert!(!s.lost);
+        assert_eq!(s.value.left_switch, Switch::Middle);
     }
 
     #[test]

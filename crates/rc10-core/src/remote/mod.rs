@@ -125,22 +125,36 @@ impl<T: Copy> Link<T> {
 /// What feeding one byte to a [`GapFramer`] produced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Framed<const N: usize> {
-    /// The frame is not complete yet.
+    /// Nothing complete yet.
     Pending,
-    /// The byte completed a frame.
-    Frame([u8; N]),
+    /// The byte came after a gap that proves the `N` bytes before it a whole frame (nothing
+    /// followed them), with the time of the frame's last byte; the byte starts the next frame.
+    Frame([u8; N], Instant),
     /// The byte came after a gap that cut the previous frame short; it starts a new frame.
     /// The short frame is dropped.
     Truncated,
+    /// The byte came without a gap after `N` bytes: the burst is longer than a frame (a byte
+    /// crept in, or it is not this protocol). The burst is dropped up to the next gap: its
+    /// first `N` bytes are not a frame, whatever they would parse as.
+    Overlong,
 }
 
 /// Assembles fixed-length frames from a byte stream whose frames are separated by silence on
-/// the line (DBUS, SBUS): a byte arriving more than `gap` after the previous one starts a new
-/// frame, so a lost byte costs one frame, not all that follow.
+/// the line (DBUS, SBUS). A frame is exactly `N` bytes between two silences longer than
+/// `gap`:
+/// - a byte arriving more than `gap` after the previous one starts a new frame, so a lost
+///   byte costs one frame, not all that follow;
+/// - `N` bytes are a frame only once the silence after them is seen (the next byte comes
+///   after a gap, or [`poll`](Self::poll) finds the line quiet for more than `gap`): a byte
+///   that crept into a frame (line noise) makes the burst `N + 1` long, and it is dropped
+///   rather than read shifted by one byte (DBUS has no checksum: a shifted frame can parse
+///   as phantom keys or a mouse click).
 #[derive(Debug, Clone)]
 pub struct GapFramer<const N: usize> {
     buf: [u8; N],
     len: usize,
+    /// Dropping an overlong burst until the next gap (`len` stays 0 meanwhile).
+    discarding: bool,
     last_byte: Option<Instant>,
     gap: Duration,
 }
@@ -151,6 +165,7 @@ impl<const N: usize> GapFramer<N> {
         Self {
             buf: [0; N],
             len: 0,
+            discarding: false,
             last_byte: None,
             gap,
         }
@@ -162,10 +177,25 @@ impl<const N: usize> GapFramer<N> {
         let after_gap = self
             .last_byte
             .is_none_or(|t| now.checked_duration_since(t).is_none_or(|d| d > self.gap));
-        self.last_byte = Some(now);
-        let truncated = after_gap && self.len > 0;
-        if truncated {
+        let previous = self.last_byte.replace(now);
+        let mut framed = Framed::Pending;
+        if after_gap {
+            // (While a burst is dropped, `len` stays 0: nothing to report.)
+            if self.len == N
+                && let Some(at) = previous
+            {
+                framed = Framed::Frame(self.buf, at);
+            } else if self.len > 0 {
+                framed = Framed::Truncated;
+            }
             self.len = 0;
+            self.discarding = false;
+        } else if self.discarding {
+            return Framed::Pending;
+        } else if self.len == N {
+            self.len = 0;
+            self.discarding = true;
+            return Framed::Overlong;
         }
         if let Some(slot) = self.buf.get_mut(self.len) {
             *slot = byte;
@@ -177,13 +207,21 @@ impl<const N: usize> GapFramer<N> {
                 self.len += 1;
             }
         }
-        if self.len == N {
+        framed
+    }
+
+    /// The frame the line's silence has proven whole by `now`: `N` bytes received, the last
+    /// more than `gap` before `now`, nothing after them. Returns it (with its last byte's time)
+    /// once.
+    pub fn poll(&mut self, now: Instant) -> Option<([u8; N], Instant)> {
+        let at = self.last_byte?;
+        let quiet = now.checked_duration_since(at).is_some_and(|d| d > self.gap);
+        // (While a burst is dropped, `len` stays 0.)
+        if self.len == N && quiet {
             self.len = 0;
-            Framed::Frame(self.buf)
-        } else if truncated {
-            Framed::Truncated
+            Some((self.buf, at))
         } else {
-            Framed::Pending
+            None
         }
     }
 }
@@ -213,9 +251,15 @@ pub trait ReceiverFrame: Copy {
 /// (its bytes are stamped back from when they were read; see [`Shared::push_bytes_ending_at`]).
 pub const FRAME_GAP: Duration = Duration::from_micros(2500);
 
-/// A receiver of `N`-byte frames of type `F`, fed byte by byte (UART RX interrupt, framed by
-/// line silence) or frame by frame (UART idle-line DMA); see [`dbus::DbusReceiver`] and
-/// [`sbus::SbusReceiver`].
+/// A receiver of `N`-byte frames of type `F`, fed byte by byte (UART RX interrupt or DMA
+/// chunks, framed by line silence: [`GapFramer`]) or frame by frame (a burst known to be
+/// whole); see [`dbus::DbusReceiver`] and [`sbus::SbusReceiver`].
+///
+/// Fed byte by byte, a frame counts once the silence after it proves it whole: when the
+/// next frame's first byte arrives, or when [`signal`](Self::signal) or
+/// [`poll`](Self::poll) runs more than [`FRAME_GAP`] (2.5 ms) after its last byte. Read at
+/// 1 kHz, a frame is acted on 2.5–3.5 ms after its last byte; a burst with a byte too many
+/// is dropped and counted, never read shifted.
 #[derive(Debug, Clone)]
 pub struct FrameReceiver<F: ReceiverFrame, const N: usize> {
     framer: GapFramer<N>,
@@ -234,16 +278,26 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
         }
     }
 
-    /// Feeds one byte received at `now`; returns the frame it completed, if any.
+    /// Feeds one byte received at `now`; returns the frame that the gap before this byte
+    /// proved whole, if any (counted at its last byte's time).
     pub fn push_byte(&mut self, byte: u8, now: Instant) -> Option<Result<F, F::Error>> {
         match self.framer.push(byte, now) {
-            Framed::Frame(frame) => Some(self.push_frame(&frame, now)),
-            Framed::Truncated => {
-                self.link.reject(); // the frame the gap cut short
+            Framed::Frame(frame, at) => Some(self.push_frame(&frame, at)),
+            // A frame cut short by a gap, or a burst longer than a frame.
+            Framed::Truncated | Framed::Overlong => {
+                self.link.reject();
                 None
             }
             Framed::Pending => None,
         }
+    }
+
+    /// Takes the frame whose last byte came more than [`FRAME_GAP`] before `now` with nothing
+    /// after it (the silence proves it whole), if one waits: returns it as
+    /// [`push_byte`](Self::push_byte) would have. [`signal`](Self::signal) calls this first.
+    pub fn poll(&mut self, now: Instant) -> Option<Result<F, F::Error>> {
+        let (frame, at) = self.framer.poll(now)?;
+        Some(self.push_frame(&frame, at))
     }
 
     /// Feeds a whole frame received at `now`. A frame in which the receiver reports failsafe
@@ -263,8 +317,10 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
         parsed
     }
 
-    /// The frame to act on at `now` (neutral if lost or in failsafe).
-    pub fn signal(&self, now: Instant) -> Signal<F> {
+    /// The frame to act on at `now` (neutral if lost or in failsafe), after taking a frame
+    /// the line's silence has proven whole by `now` ([`poll`](Self::poll)).
+    pub fn signal(&mut self, now: Instant) -> Signal<F> {
+        let _ = self.poll(now);
         self.link.signal(now)
     }
 
@@ -417,6 +473,9 @@ mod shared_tests {
         // And the next frame, 14 ms later, in one chunk.
         let t3 = t1 + Duration::from_millis(14);
         rx.push_bytes_ending_at(&frame, t3, byte);
+        // Its first byte proved the first frame whole; the silence after it, the second.
+        assert_eq!(rx.with(|r| r.link().frames()), 1);
+        assert!(rx.with(|r| r.poll(t3 + Duration::from_millis(3))).is_some());
         assert_eq!(rx.with(|r| r.link().frames()), 2);
         assert_eq!(rx.with(|r| r.link().errors()), 0);
         // An absurd byte time stamps the earlier bytes at time zero instead of panicking in
@@ -444,6 +503,7 @@ mod shared_tests {
         rx.push_bytes_ending_at(&frame[..9], t1, byte);
         let t2 = t1 + byte * 9 + Duration::from_micros(2200);
         rx.push_bytes_ending_at(&frame[9..], t2, byte);
+        let _ = rx.with(|r| r.signal(t2 + Duration::from_millis(3)));
         assert_eq!(rx.with(|r| r.link().frames()), 1);
         assert_eq!(rx.with(|r| r.link().errors()), 0);
     }
@@ -461,6 +521,7 @@ mod shared_tests {
         rx.push_bytes_ending_at(&frame[..24], start + byte * 23, byte);
         let next = start + Duration::from_millis(7);
         rx.push_bytes_ending_at(&frame, next + byte * 24, byte);
+        let _ = rx.with(|r| r.signal(next + Duration::from_millis(7)));
         assert_eq!(rx.with(|r| r.link().frames()), 1);
         assert_eq!(rx.with(|r| r.link().errors()), 1);
     }
@@ -487,7 +548,7 @@ mod tests {
     }
 
     #[test]
-    fn gap_framer_cuts_on_silence_and_completes_on_length() {
+    fn gap_framer_takes_exactly_n_bytes_between_silences() {
         let mut f = GapFramer::<3>::new(Duration::from_millis(1));
         let at = Instant::from_micros;
         assert_eq!(f.push(1, at(0)), Framed::Pending);
@@ -495,8 +556,39 @@ mod tests {
         // 2 ms of silence: the two bytes were a cut-short frame; 9 starts a new one.
         assert_eq!(f.push(9, at(2100)), Framed::Truncated);
         assert_eq!(f.push(8, at(2200)), Framed::Pending);
-        assert_eq!(f.push(7, at(2300)), Framed::Frame([9, 8, 7]));
-        assert_eq!(f.push(6, at(2400)), Framed::Pending);
+        // Three bytes: a frame only if silence follows.
+        assert_eq!(f.push(7, at(2300)), Framed::Pending);
+        assert_eq!(f.poll(at(3300)), None); // 1 ms of silence is not more than the gap
+        // 6 comes after more than the gap: 9 8 7 were a frame, ending at 2300 µs.
+        assert_eq!(f.push(6, at(3301)), Framed::Frame([9, 8, 7], at(2300)));
+        assert_eq!(f.push(5, at(3400)), Framed::Pending);
+        assert_eq!(f.push(4, at(3500)), Framed::Pending);
+        // Or the line stays quiet: polled after more than the gap, 6 5 4 are a frame, once.
+        assert_eq!(f.poll(at(4500)), None);
+        assert_eq!(f.poll(at(4501)), Some(([6, 5, 4], at(3500))));
+        assert_eq!(f.poll(at(9000)), None);
+        assert_eq!(f.push(3, at(9000)), Framed::Pending); // the next frame starts afresh
+    }
+
+    #[test]
+    fn gap_framer_drops_a_burst_longer_than_a_frame() {
+        let mut f = GapFramer::<3>::new(Duration::from_millis(1));
+        let at = Instant::from_micros;
+        assert_eq!(f.push(1, at(0)), Framed::Pending);
+        assert_eq!(f.push(2, at(100)), Framed::Pending);
+        assert_eq!(f.push(3, at(200)), Framed::Pending);
+        // A fourth byte without a gap: 1 2 3 were not a frame.
+        assert_eq!(f.push(4, at(300)), Framed::Overlong);
+        // The rest of the burst is dropped with it (reported once), up to the next gap.
+        assert_eq!(f.push(5, at(400)), Framed::Pending);
+        assert_eq!(f.push(6, at(500)), Framed::Pending);
+        assert_eq!(f.push(7, at(600)), Framed::Pending);
+        assert_eq!(f.poll(at(5000)), None);
+        // After the gap: a frame again.
+        assert_eq!(f.push(7, at(6000)), Framed::Pending);
+        assert_eq!(f.push(8, at(6100)), Framed::Pending);
+        assert_eq!(f.push(9, at(6200)), Framed::Pending);
+        assert_eq!(f.poll(at(7201)), Some(([7, 8, 9], at(6200))));
     }
 
     #[test]

@@ -283,7 +283,28 @@ mod tests {
             }
             t += 4000;
         }
+        // The last frame is proven whole by the silence after it.
+        if let Some(Ok(_)) = rx.poll(Instant::from_micros(t)) {
+            ok += 1;
+        }
         assert_eq!(ok, 3);
         assert_eq!(rx.frames_lost(), 3);
+    }
+
+    #[test]
+    fn a_byte_that_creeps_into_a_frame_drops_it_instead_of_shifting_it() {
+        // A 0x00 after the header: read as the first 25 bytes, every channel would shift by a
+        // byte and the flags byte (0) would land on the footer, which 0 satisfies.
+        let mut rx = SbusReceiver::new(Duration::from_millis(100));
+        let frame = encode([992; 16], 0, 0);
+        let mut burst = frame.to_vec();
+        burst.insert(1, 0x00);
+        let mut t = 0u64;
+        for byte in &burst {
+            t += 120;
+            assert!(rx.push_byte(*byte, Instant::from_micros(t)).is_none());
+        }
+        assert!(rx.signal(Instant::from_micros(t + 4_000)).lost);
+        assert_eq!((rx.link().frames(), rx.link().errors()), (0, 1));
     }
 }

@@ -33,6 +33,7 @@ use rc10_core::motor::dm::{
 };
 use rc10_core::motor::vesc::{VescCommand, VescConfig, VescMotor, VescStatusSet};
 use rc10_core::node::{CanNode, FrameError, TxBatch};
+use rc10_core::remote::FRAME_GAP;
 use rc10_core::remote::dbus::{DbusFrame, DbusReceiver, Switch};
 use rc10_core::remote::ppm::{PpmError, PpmReceiver};
 use rc10_core::remote::sbus::{SbusFrame, SbusReceiver};
@@ -844,13 +845,39 @@ proptest! {
         let mut rx = DbusReceiver::new(Duration::from_millis(100));
         let mut t = T0;
         for (f, gap_ms) in frames {
-            let (out, end) = feed(&dbus_encode(&f), t, |b, now| rx.push_byte(b, now));
+            let (mut out, end) = feed(&dbus_encode(&f), t, |b, now| rx.push_byte(b, now));
+            // Whole once the silence after it is longer than the frame gap (`end` is one
+            // byte time after the last byte).
+            let done = end + FRAME_GAP;
+            out.extend(rx.poll(done));
             prop_assert_eq!(out, vec![Ok(dbus_expected(&f))]);
-            let sig = rx.signal(end);
+            let sig = rx.signal(done);
             prop_assert!(!sig.lost);
             prop_assert_eq!(sig.value, dbus_expected(&f));
             t = end + Duration::from_millis(gap_ms);
         }
+    }
+
+    /// A byte that creeps into a DR16 frame anywhere (line noise) makes a 19-byte burst:
+    /// dropped and counted, never read as a frame shifted by a byte (DBUS has no checksum, so
+    /// a shifted frame could read as keys or a mouse click). The next clean frame is read.
+    #[test]
+    fn dbus_burst_with_a_byte_too_many_is_dropped(
+        f in dr16(), g in dr16(), at in 0usize..=18, extra: u8,
+    ) {
+        let mut rx = DbusReceiver::new(Duration::from_millis(100));
+        let mut burst = dbus_encode(&f).to_vec();
+        burst.insert(at, extra);
+        let (mut out, end) = feed(&burst, T0, |b, now| rx.push_byte(b, now));
+        out.extend(rx.poll(end + FRAME_GAP));
+        prop_assert!(out.is_empty(), "{:?}", out);
+        prop_assert_eq!(rx.link().errors(), 1);
+        prop_assert_eq!(rx.link().frames(), 0);
+        prop_assert!(rx.signal(end + FRAME_GAP).lost);
+        let t = end + Duration::from_millis(12);
+        let (mut out, end) = feed(&dbus_encode(&g), t, |b, now| rx.push_byte(b, now));
+        out.extend(rx.poll(end + FRAME_GAP));
+        prop_assert_eq!(out, vec![Ok(dbus_expected(&g))]);
     }
 
     /// Any 16 channel values, flags and footer parse back equal.
@@ -897,9 +924,11 @@ proptest! {
             let channels = channels.map(|c| c & 0x7FF);
             let bytes = sbus_encode(&channels, flags, footer);
             let want = SbusFrame::parse(&bytes).unwrap();
-            let (out, end) = feed(&bytes, t, |b, now| rx.push_byte(b, now));
+            let (mut out, end) = feed(&bytes, t, |b, now| rx.push_byte(b, now));
+            let done = end + FRAME_GAP;
+            out.extend(rx.poll(done));
             prop_assert_eq!(out, vec![Ok(want)]);
-            let sig = rx.signal(end);
+            let sig = rx.signal(done);
             if flags & 8 != 0 {
                 live = false; // failsafe: neutral at once
             } else if flags & 4 == 0 {
