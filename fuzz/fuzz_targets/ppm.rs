@@ -90,7 +90,9 @@ impl<const N: usize> Rx<N> {
                     .map(|w| *w as u16)
                     .collect();
                 assert_eq!(frame.as_slice(), widths.as_slice());
-                self.oracle.accept(frame, now);
+                // The frame ended where its sync gap began: the edge closing its last channel.
+                self.oracle
+                    .accept(frame, now.saturating_sub(u64::from(interval)));
             }
             Some(Err(PpmError::BadInterval(us))) => {
                 assert!(!complete);

@@ -103,25 +103,30 @@ pub fn run_stream<F, const N: usize>(
     let mut oracle = LinkOracle::<F>::new();
     let mut framing = Framing::<N>::default();
     let mut now: u64 = 1_000_000;
-    let settle = |oracle: &mut LinkOracle<F>, result: Result<F, F::Error>, bytes: &[u8], at: u64| {
-        let expected = parse(bytes);
-        match (&result, expected) {
-            (Ok(f), Some(e)) => {
-                assert_eq!(*f, e, "frame {bytes:02X?} decoded wrongly");
-                check_frame(f);
-                if failsafe(f) {
-                    oracle.failsafe(at);
-                } else if f.frame_lost() {
-                    oracle.hold(*f);
-                } else {
-                    oracle.accept(*f, at);
+    let settle =
+        |oracle: &mut LinkOracle<F>, result: Result<F, F::Error>, bytes: &[u8], at: u64| {
+            let expected = parse(bytes);
+            match (&result, expected) {
+                (Ok(f), Some(e)) => {
+                    assert_eq!(*f, e, "frame {bytes:02X?} decoded wrongly");
+                    check_frame(f);
+                    if failsafe(f) {
+                        oracle.failsafe(at);
+                    } else if f.frame_lost() {
+                        oracle.hold(*f);
+                    } else {
+                        oracle.accept(*f, at);
+                    }
                 }
+                (Err(_), None) => {}
+                (r, e) => panic!("frame {bytes:02X?}: parser says {r:?}, protocol says {e:?}"),
             }
-            (Err(_), None) => {}
-            (r, e) => panic!("frame {bytes:02X?}: parser says {r:?}, protocol says {e:?}"),
-        }
-        assert_eq!(F::parse(bytes), result, "stream and whole-frame parse differ");
-    };
+            assert_eq!(
+                F::parse(bytes),
+                result,
+                "stream and whole-frame parse differ"
+            );
+        };
     while !u.is_empty() {
         let Ok(ctl) = u8::arbitrary(&mut u) else {
             break;
@@ -158,7 +163,10 @@ pub fn run_stream<F, const N: usize>(
                     let result = result.expect("N bytes between two silences not taken as a frame");
                     settle(&mut oracle, result, &bytes, at);
                 }
-                assert!(rx.poll(Instant::from_ticks(later)).is_none(), "a frame the protocol does not frame");
+                assert!(
+                    rx.poll(Instant::from_ticks(later)).is_none(),
+                    "a frame the protocol does not frame"
+                );
                 check_signal(&mut rx, &oracle, later, neutral);
                 continue;
             }

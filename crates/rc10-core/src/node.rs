@@ -266,7 +266,7 @@ impl core::error::Error for FrameError {}
 /// The frames one tick sends on one bus, in the order they were packed.
 ///
 /// Slot writes with the same command ID merge into one 8-byte frame whose unwritten slots are
-/// zero (an unregistered or offline motor's slot is therefore sent as zero current). Beyond
+/// zero (an unregistered or offline motor's slot is therefore sent as a zero command: zero current, or 0 V for a GM6020 in voltage mode, which brakes a spinning rotor through its back-EMF rather than letting it coast). Beyond
 /// [`MAX_FRAMES_PER_TICK`] frames, further ones are counted in
 /// [`overflowed`](Self::overflowed), never silently lost.
 ///
@@ -417,8 +417,8 @@ impl TxBatch {
     }
 
     /// Drops the whole frames packed at index `from` and after that a node did not declare:
-    /// beyond `frames_per_tick` of them, or on an ID outside `sends` (slot frames are left
-    /// alone). Returns how many were dropped. The bus calls this after each node's
+    /// on an ID outside `sends`, or beyond the first `frames_per_tick` on IDs in it (slot
+    /// frames are left alone). Returns how many were dropped. The bus calls this after each node's
     /// `pack_command`, so a node can never send what registration did not check.
     #[allow(
         clippy::arithmetic_side_effects,
@@ -433,8 +433,13 @@ impl TxBatch {
                 i += 1;
                 continue;
             }
-            whole = whole.saturating_add(1);
-            if whole > frames_per_tick || !sends.matches(frame.id()) {
+            // Only declared frames use up the allowance: an undeclared one dropped before a
+            // declared one must not take the declared one down with it.
+            let declared = sends.matches(frame.id());
+            if declared {
+                whole = whole.saturating_add(1);
+            }
+            if !declared || whole > frames_per_tick {
                 self.frames.remove(i);
                 // Frames after `i` moved down: the remembered slot frame may have moved.
                 self.last_slot = NO_SLOT_FRAME;
@@ -574,6 +579,19 @@ mod tests {
         b.write_slot(CommandSlot::new(0x1FF, 1).unwrap(), 3);
         assert_eq!(b.frames().len(), 3);
         assert_eq!(b.frames()[2].data(), &[0, 2, 0, 3, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn an_undeclared_frame_does_not_use_up_the_allowance_of_a_declared_one() {
+        // A node allowed one frame on 0x301 packs a stray 0x305 first: the stray goes, the
+        // command stays (counting the stray dropped both, and the motor timed out).
+        let mut b = TxBatch::new();
+        b.push(CanFrame::standard(0x305, &[1]).unwrap()).unwrap();
+        b.push(CanFrame::standard(0x301, &[2]).unwrap()).unwrap();
+        let sends = IdSet::one(IdFilter::standard(0x301));
+        assert_eq!(b.keep_declared(0, 1, &sends), 1);
+        let ids: Vec<u32> = b.frames().iter().map(|f| f.raw_id()).collect();
+        assert_eq!(ids, [0x301]);
     }
 
     #[test]

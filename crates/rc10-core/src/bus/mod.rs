@@ -165,9 +165,11 @@ pub enum RegisterError {
     },
     /// The node and the node registered at `existing` would both send frames on `id`: two
     /// whole-frame senders, or a whole frame on the ID of a shared slot frame (which would
-    /// otherwise be merged with, or sent next to, the DJI slot frame).
+    /// otherwise be merged with, or sent next to, the DJI slot frame). `existing` is the
+    /// node's own index (the number of nodes registered) when it would send a whole frame on
+    /// its own slot frame's ID.
     SendConflict {
-        /// Index of the node already registered.
+        /// Index of the node already registered (or the node's own, see above).
         existing: usize,
         /// The ID both send on.
         id: RawId,
@@ -297,9 +299,11 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
 
     /// Adds `node`, or says why it cannot be added (the builder is then unchanged).
     ///
-    /// Checks, against every node already registered and against the node itself: no shared
-    /// feedback ID, no shared command slot, no two senders on one ID (whole frames, or a whole
-    /// frame on a slot frame's ID), no transmission on an ID anyone listens on; then that all
+    /// Checks, against every node already registered: no shared feedback ID, no shared
+    /// command slot, no two senders on one ID (whole frames, or a whole frame on a slot
+    /// frame's ID), no transmission on an ID anyone listens on; against the node itself: no
+    /// transmission on an ID it listens on, no whole frame on its own slot frame's ID
+    /// ([`RegisterError::SendConflict`] with `existing` its own index); then that all
     /// command frames of a tick fit [`BusConfig::tx_depth`] and the load fits
     /// [`BusConfig::max_load_percent`].
     pub fn register(&mut self, node: &'a dyn CanNode) -> Result<(), RegisterError> {
@@ -321,6 +325,13 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
                 listener: me,
                 id,
             });
+        }
+        // A whole frame on its own slot frame's ID: two different frames on one ID each tick
+        // (the other ESCs on that command frame would read the whole frame as theirs).
+        if let Some(slot) = mine.command_slot
+            && let Some(id) = mine.sends.common_id_with(&IdSet::one(slot.frame_filter()))
+        {
+            return Err(RegisterError::SendConflict { existing: me, id });
         }
         for (i, other) in self.nodes.iter().enumerate() {
             let theirs = other.bus_usage();

@@ -461,6 +461,32 @@ fn masked_listener_conflicts_with_exact_one() {
 }
 
 #[test]
+fn a_node_sending_a_whole_frame_on_its_own_slot_frame_id_is_rejected() {
+    // Slot 0 of 0x200 and a whole 0x200 frame: two different 0x200 frames each tick, and
+    // C620s 2–4 (unregistered, so meant to get 0 A) would read the whole frame as currents.
+    let mut probe = Probe::new("p", leak_log());
+    probe.usage = BusUsage::NONE
+        .with_slot(CommandSlot::new(0x200, 0).unwrap())
+        .sending(IdFilter::standard(0x200), 1);
+    let mut fine = Probe::new("q", leak_log());
+    fine.usage = BusUsage::NONE
+        .with_slot(CommandSlot::new(0x200, 0).unwrap())
+        .sending(IdFilter::standard(0x300), 1);
+    let wheel = DjiMotor::m3508(5).unwrap(); // 0x1FF: unrelated
+    let mut b = BusBuilder::<4>::new();
+    b.register(&wheel).unwrap();
+    assert_eq!(
+        b.register(&probe),
+        Err(RegisterError::SendConflict {
+            existing: 1,
+            id: std_id(0x200)
+        })
+    );
+    // On another ID it is fine.
+    assert_eq!(b.register(&fine), Ok(()));
+}
+
+#[test]
 fn two_damiao_motors_on_one_can_id_are_rejected() {
     let a = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
     let b = DmMotor::new(0x01, DmConfig::new(0x12)).unwrap();

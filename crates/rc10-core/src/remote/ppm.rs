@@ -68,7 +68,11 @@ impl<const N: usize> PpmReceiver<N> {
         }
     }
 
-    /// Feeds one interval in µs measured at `now`; returns the frame a sync gap completed.
+    /// Feeds one interval in µs measured at `now` (the edge that ends it); returns the frame a
+    /// sync gap completed. The link counts a frame from the edge that closed its last channel
+    /// (`now − interval`, where the sync gap began), so a frame completed by pulses that
+    /// stopped and came back after longer than the link timeout is already stale: the
+    /// signal stays lost until the next frame.
     pub fn push_interval(
         &mut self,
         interval_us: u32,
@@ -83,7 +87,13 @@ impl<const N: usize> PpmReceiver<N> {
                 return None; // the first sync only starts counting
             }
             return Some(if count == N {
-                self.link.accept(self.current, now);
+                // The frame ended at the edge that closed its last channel, where the sync
+                // gap began: stamped there, a frame whose "sync" was pulses stopping and
+                // coming back much later is as old as it is (a receiver set to "no pulses"
+                // stops right after a frame; its last values must not come back as fresh).
+                let ended = Duration::from_micros(u64::from(interval_us));
+                let ended = now.checked_sub(ended).unwrap_or(Instant::from_ticks(0));
+                self.link.accept(self.current, ended);
                 Ok(self.current)
             } else {
                 self.link.reject();
@@ -192,6 +202,35 @@ mod tests {
             Some(Err(PpmError::WrongChannelCount(6)))
         );
         assert!(rx.signal(t).lost);
+    }
+
+    #[test]
+    fn a_frame_counts_from_its_last_edge_so_pulses_that_come_back_do_not_revive_it() {
+        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
+        let mut t = Instant::from_millis(10);
+        rx.push_interval(6000, t);
+        for _ in 0..8 {
+            t += Duration::from_micros(2000);
+            assert_eq!(rx.push_interval(2000, t), None);
+        }
+        // The receiver (set to "no pulses") stops after channel 8 and comes back 1 s later:
+        // its first edge closes a 1 s "sync gap". The frame's values are 1 s old.
+        let back = t + Duration::from_millis(1000);
+        assert_eq!(rx.push_interval(1_000_000, back), Some(Ok([2000; 8])));
+        assert!(rx.signal(back).lost);
+        assert_eq!(rx.channel(0, back, 0.0), 0.0);
+        // A running train: the frame counts from the edge that closed channel 8 (where the
+        // 6 ms sync gap began), fresh for the 100 ms timeout from there.
+        let mut t = back;
+        for _ in 0..8 {
+            t += Duration::from_micros(1000);
+            assert_eq!(rx.push_interval(1000, t), None);
+        }
+        let sync_end = t + Duration::from_micros(6000);
+        assert_eq!(rx.push_interval(6000, sync_end), Some(Ok([1000; 8])));
+        let timeout_end = t + Duration::from_millis(100);
+        assert!(!rx.signal(timeout_end).lost);
+        assert!(rx.signal(timeout_end + Duration::from_micros(1)).lost);
     }
 
     #[test]
