@@ -568,6 +568,10 @@ mod tests {
         assert_eq!(f.poll(at(4501)), Some(([6, 5, 4], at(3500))));
         assert_eq!(f.poll(at(9000)), None);
         assert_eq!(f.push(3, at(9000)), Framed::Pending); // the next frame starts afresh
+        // A byte exactly the gap after the one before is still the same burst.
+        assert_eq!(f.push(2, at(10_000)), Framed::Pending);
+        assert_eq!(f.push(1, at(10_100)), Framed::Pending);
+        assert_eq!(f.poll(at(11_101)), Some(([3, 2, 1], at(10_100))));
     }
 
     #[test]
