@@ -50,7 +50,10 @@ pub fn sbus_config(inverted: bool) -> usart::Config {
 /// thus stay `byte_time` apart even when the DMA splits the frame, and the decoder's frame gap
 /// ([`FRAME_GAP`](rc10_core::remote::FRAME_GAP), 2.5 ms) finds frame boundaries as long as
 /// this task reads each chunk within about 2.3 ms of its end: run it where nothing holds the
-/// executor that long (or on an interrupt executor). UART errors (framing, parity, overrun) are
+/// executor that long (or on an interrupt executor). The silence the decoder sees between
+/// two frames is the real one shortened by how much later the first frame's chunk was read
+/// than the second's: with SBUS at 7 ms (4 ms of silence), a chunk read more than 1.5 ms late
+/// and the next read on time merge two frames, and both are dropped as one burst too long. UART errors (framing, parity, overrun) are
 /// counted in [`Shared::input_errors`]; the decoder resynchronises on the next frame gap.
 pub async fn run_uart_receiver<F: ReceiverFrame, const N: usize>(
     mut rx: RingBufferedUartRx<'static>,

@@ -246,7 +246,9 @@ pub trait ReceiverFrame: Copy {
 
 /// Silence that ends a frame of a DBUS or SBUS stream. The bytes of a frame are 110–120 µs
 /// apart; the silence between frames is 12 ms on DBUS (an 18-byte frame every 14 ms) and at
-/// least 4 ms on SBUS (a 25-byte frame every 7 ms at the fastest). 2.5 ms sits between them
+/// least 4 ms on SBUS (a 25-byte frame every 7 ms at the fastest; a source with less than
+/// 2.5 ms of silence between frames cannot be framed: its bursts merge and are dropped as too
+/// long). 2.5 ms sits between them
 /// and leaves the UART task 2.3 ms to be late with the second half of a frame the DMA split
 /// (its bytes are stamped back from when they were read; see [`Shared::push_bytes_ending_at`]).
 pub const FRAME_GAP: Duration = Duration::from_micros(2500);
@@ -258,7 +260,9 @@ pub const FRAME_GAP: Duration = Duration::from_micros(2500);
 /// Fed byte by byte, a frame counts once the silence after it proves it whole: when the
 /// next frame's first byte arrives, or when [`signal`](Self::signal) or
 /// [`poll`](Self::poll) runs more than [`FRAME_GAP`] (2.5 ms) after its last byte. Read at
-/// 1 kHz, a frame is acted on 2.5–3.5 ms after its last byte; a burst with a byte too many
+/// 1 kHz, a frame is acted on 2.5–3.5 ms after its last byte's stamp (with the DMA adapter,
+/// when the chunk holding it was read: add the idle-line detection, about one byte time, and
+/// the UART task's lateness); a burst with a byte too many
 /// is dropped and counted, never read shifted.
 #[derive(Debug, Clone)]
 pub struct FrameReceiver<F: ReceiverFrame, const N: usize> {

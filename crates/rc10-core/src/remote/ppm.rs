@@ -58,7 +58,10 @@ pub struct PpmReceiver<const N: usize> {
 }
 
 impl<const N: usize> PpmReceiver<N> {
-    /// A decoder that goes neutral (all 1500 µs) after `timeout` without a valid frame.
+    /// A decoder that goes neutral (all 1500 µs) after `timeout` without a valid frame. A
+    /// frame counts from its last channel's edge, so the next one completes a frame period
+    /// plus a sync gap later (about 37 ms for 22.5 ms frames): keep `timeout` well above
+    /// that (100 ms is usual).
     pub const fn new(timeout: Duration) -> Self {
         Self {
             current: [1500; N],
