@@ -19,7 +19,7 @@ use rc10_core::can::CanFrame;
 use rc10_core::motor::Motor;
 use rc10_core::motor::dji::DjiMotor;
 use rc10_core::node::TxBatch;
-use rc10_core::pid::{IncrementalPid, IncrementalPidConfig, Pid, PidConfig};
+use rc10_core::pid::{IncrementalPid, IncrementalPidConfig, Pid, PidConfig, PidTerms};
 use rc10_core::time::{DeltaTime, Duration, Instant};
 
 const SAMPLES: usize = 1000;
@@ -90,6 +90,20 @@ enum Stat {
     Median,
     Max,
     Mean,
+}
+
+/// One positional PID step, behind a call as the firmware's motor makes it: the figure is
+/// the step's own, not whatever the bench's main loop inlined it into (its register
+/// allocation shifted by tens of instructions when an unrelated function changed).
+#[inline(never)]
+fn positional_step(pid: &mut Pid, measurement: f32) -> PidTerms {
+    pid.update(black_box(300.0), measurement, black_box(0.001))
+}
+
+/// One incremental PID step, behind a call (see [`positional_step`]).
+#[inline(never)]
+fn incremental_step(pid: &mut IncrementalPid, measurement: f32) -> PidTerms {
+    pid.update(black_box(300.0), measurement, black_box(0.001))
 }
 
 fn tick_samples(f: &Figures, motors: &'static [DjiMotor], mode: Mode, out: &mut [u32; SAMPLES]) {
@@ -236,21 +250,21 @@ fn main() -> ! {
     for (i, slot) in s.iter_mut().enumerate() {
         let m = (i % 97) as f32;
         *slot = f.cal.instructions(ticks(|| {
-            pid.update(black_box(300.0), black_box(m), black_box(0.001))
+            positional_step(&mut pid, m)
         }));
     }
     f.row("pid_positional", &mut s, Stat::Median);
     for (i, slot) in s.iter_mut().enumerate() {
         let m = (i % 97) as f32;
         *slot = f.cal.instructions(ticks(|| {
-            incremental.update(black_box(300.0), black_box(m), black_box(0.001))
+            incremental_step(&mut incremental, m)
         }));
     }
     f.row("pid_incremental", &mut s, Stat::Median);
     for (i, slot) in s.iter_mut().enumerate() {
         let m = (i % 97) as f32;
         *slot = f.cal.instructions(ticks(|| {
-            with_td.update(black_box(300.0), black_box(m), black_box(0.001))
+            incremental_step(&mut with_td, m)
         }));
     }
     f.row("pid_incremental_td", &mut s, Stat::Median);
