@@ -33,7 +33,8 @@ pub struct IncrementalPidConfig {
     /// limiting it is the anti-windup: the output leaves the limit as soon as the error reverses.
     pub output_limit: f32,
     /// While `|error| ≤ deadband` the output is held (no increment) and the error history is
-    /// not updated, so the P and D differences span the steps outside the band. 0 is no band.
+    /// not updated, so the P difference and the D rate span the time since the error was last
+    /// outside the band. 0 is no band.
     pub deadband: f32,
     /// Tracking-differentiator speed `r` in rad/s applied to the target; `None` for no TD.
     pub td_r_rad_s: Option<f32>,
@@ -94,8 +95,16 @@ impl IncrementalPidConfig {
 }
 
 /// Incremental PID: each step adds
-/// `Δu = kp·(e[k] - e[k-1]) + ki·e[k]·dt + kd·(e[k] - 2e[k-1] + e[k-2]) / dt`
-/// to the output, which is limited to `±output_limit`.
+/// `Δu = kp·(e[k] - e[k-1]) + ki·e[k]·dt + kd·(ė[k] - ė[k-1])`
+/// to the output, which is limited to `±output_limit`; `ė[k] = (e[k] - e[k-1]) / Δt[k]` is the
+/// error's rate over the time `Δt[k]` since `e[k-1]`.
+///
+/// At a fixed `dt` the D increment is the textbook `kd·(e[k] - 2e[k-1] + e[k-2]) / dt`. Taken
+/// as a difference of rates, the D increments add up to `kd·ė[k]` whatever the steps' `dt`
+/// (the textbook form drifts without bound when `dt` varies), and a step that leaves the
+/// deadband measures the rate over the whole time since the error was last outside it
+/// rather than over one `dt` (no spike). A changed `kd` ([`set_config`](Self::set_config))
+/// takes the D part of the output to the new `kd·ė` in one step.
 ///
 /// With a TD, `e = tracked target - measurement`, where the TD follows the target smoothly
 /// (so a target step does not kick P and D). On the first step after construction or
@@ -116,7 +125,10 @@ pub struct IncrementalPid {
     band: f32,
     td: Option<TrackingDifferentiator>,
     output: f32,
+    /// The last error outside the deadband, and the D part of the output then (`kd·ė`).
     history: Option<(f32, f32)>,
+    /// Seconds since the error in `history` (valid `dt`s of the steps inside the band).
+    since_s: f32,
     last: PidTerms,
 }
 
@@ -145,6 +157,7 @@ impl IncrementalPid {
             td,
             output: 0.0,
             history: None,
+            since_s: 0.0,
             last: PidTerms::ZERO,
         })
     }
@@ -198,32 +211,41 @@ impl IncrementalPid {
             None => target,
         };
         let e = ErrorMode::Linear.diff(tracked, measurement);
-        let (e1, e2) = self.history.unwrap_or((e, e));
+        let (e1, d_before) = self.history.unwrap_or((e, 0.0));
         let dt_ok = dt_valid(dt_s);
-
-        let outside_band = e.abs() > self.band;
-        let (p, i, d) = if dt_ok && outside_band {
-            (
-                finite(c.kp * (e - e1)),
-                finite(c.ki * e * dt_s),
-                // kd = 0 (the usual speed loop): no divide.
-                if c.kd == 0.0 {
-                    0.0
-                } else {
-                    finite(c.kd * (e - 2.0 * e1 + e2) / dt_s)
-                },
-            )
+        if !dt_ok {
+            // Held: no step, and no time passed for the rate.
+            self.last = PidTerms {
+                output: self.output,
+                ..PidTerms::ZERO
+            };
+            return self.last;
+        }
+        let since_s = self.since_s + dt_s;
+        if e.abs() <= self.band {
+            // Inside the deadband nothing happens but the clock: the P difference and the
+            // rate then span the steps outside the band only, and a target that dithers
+            // across the band edge cannot ratchet the output by kp·(e − e_in-band) each time.
+            self.since_s = since_s;
+            self.last = PidTerms {
+                output: self.output,
+                ..PidTerms::ZERO
+            };
+            return self.last;
+        }
+        // kd = 0 (the usual speed loop): no divide.
+        let d_now = if c.kd == 0.0 {
+            0.0
         } else {
-            (0.0, 0.0, 0.0)
+            finite(c.kd * (e - e1) / since_s)
         };
+        let p = finite(c.kp * (e - e1));
+        let i = finite(c.ki * e * dt_s);
+        let d = finite(d_now - d_before);
         // Finite terms: the sum is finite or ±inf, never NaN, and the capped limit is finite.
         self.output = clamp_abs(self.output + p + i + d, below(c.output_limit, f32::MAX));
-        // Inside the deadband nothing happens, the history included: the P and D
-        // differences then span the steps outside the band only, and a target that dithers
-        // across the band edge cannot ratchet the output by kp·(e − e_in-band) each time.
-        if dt_ok && outside_band {
-            self.history = Some((e, e1));
-        }
+        self.history = Some((e, d_now));
+        self.since_s = 0.0;
         self.last = PidTerms {
             p,
             i,
@@ -253,6 +275,7 @@ impl IncrementalPid {
     pub fn reset(&mut self) {
         self.output = 0.0;
         self.history = None;
+        self.since_s = 0.0;
         if let Some(td) = &mut self.td {
             td.reset(f32::NAN);
         }
@@ -349,6 +372,72 @@ mod tests {
         let t = c.update(11.0, 0.0, DT);
         assert!((t.p + 2.0).abs() < 1e-4 && (t.i - 1.1).abs() < 1e-4 && (t.d + 3.0).abs() < 1e-3);
         assert!((t.output - 4.3).abs() < 1e-3);
+    }
+
+    #[test]
+    fn d_part_is_kd_times_the_rate_when_dt_varies() {
+        // Error ramp at 1000 units/s, dt alternating 0.5 and 1.5 ms, kd 0.001 s: the rate is
+        // 1000/s throughout, so the D part of the output is kd·ė = 1 from the second step
+        // on. (The fixed-dt form kd·(e − 2e₁ + e₂)/dt adds −2 and +2/3 on alternate steps
+        // here: −64 after 100 steps.)
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(0.0, 0.0, 0.001)).unwrap();
+        let mut e = 0.0f32;
+        for k in 0..100 {
+            let dt = if k % 2 == 0 { 0.0005 } else { 0.0015 };
+            e += 1000.0 * dt;
+            let out = c.update(e, 0.0, dt).output;
+            if k > 0 {
+                assert!((out - 1.0).abs() < 1e-3, "step {k}: {out}");
+            }
+        }
+    }
+
+    #[test]
+    fn leaving_the_deadband_measures_the_rate_since_the_error_was_last_outside_it() {
+        // Error falls 1 a ms from 8 through the band (5) to −6; kd 0.001 s: ė = −1000/s, so
+        // the D part is −1 from the second step on. At −6 the rate spans the 12 ms since 6
+        // (12 / 12 ms), not one ms (which would step the output to −12).
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(0.0, 0.0, 0.001).with_deadband(5.0))
+                .unwrap();
+        let mut last = 0.0;
+        for k in 0..=14 {
+            last = c.update(8.0 - k as f32, 0.0, DT).output;
+            if k >= 1 {
+                assert!((last + 1.0).abs() < 1e-4, "error {}: {last}", 8 - k);
+            }
+        }
+        assert!((c.last_terms().d).abs() < 1e-4, "{:?}", c.last_terms());
+        assert!((last + 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn invalid_dt_holds_without_counting_time() {
+        // Errors 0, then 1 after a NaN and a negative dt and then a 1 ms dt: the rate is 1
+        // per ms (kd·ė = 1); the held steps add no time (−0.5 ms would make it 2 per ms).
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(0.0, 0.0, 0.001)).unwrap();
+        c.update(0.0, 0.0, DT);
+        assert_eq!(c.update(0.5, 0.0, f32::NAN).output, 0.0);
+        assert_eq!(c.update(0.7, 0.0, -0.0005).output, 0.0);
+        assert!((c.update(1.0, 0.0, DT).output - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_new_kd_takes_the_d_part_to_the_new_gain_times_the_rate() {
+        // Ramp at 1 a ms: D part kd·ė = 0.001 · 1000 = 1; with kd 0.003 it becomes 3 in the
+        // first step (increment 3 − 1 = 2), and 0 in the first step with kd 0.
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(0.0, 0.0, 0.001)).unwrap();
+        for k in 0..5 {
+            c.update(k as f32, 0.0, DT);
+        }
+        assert!((c.output() - 1.0).abs() < 1e-4);
+        c.set_config(IncrementalPidConfig::new(0.0, 0.0, 0.003))
+            .unwrap();
+        assert!((c.update(5.0, 0.0, DT).output - 3.0).abs() < 1e-4);
+        assert!((c.update(6.0, 0.0, DT).output - 3.0).abs() < 1e-4);
+        c.set_config(IncrementalPidConfig::new(0.0, 0.0, 0.0))
+            .unwrap();
+        assert!(c.update(7.0, 0.0, DT).output.abs() < 1e-4);
     }
 
     #[test]

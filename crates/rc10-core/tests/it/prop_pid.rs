@@ -285,9 +285,10 @@ proptest! {
     }
 
     /// Without TD, for moderate inputs and valid dt, every increment is the velocity form
-    /// `kp·(e − e₁) + ki·e·dt + kd·(e − 2e₁ + e₂)/dt` over the errors outside the deadband
-    /// (history starting from the first of them), added to the output and limited; a step
-    /// inside the band changes nothing, its error included.
+    /// `kp·(e − e₁) + ki·e·dt + kd·(ė − ė₁)` over the errors outside the deadband (history
+    /// starting from the first of them, at rate 0), where `ė = (e − e₁)/Δt` and `Δt` is the
+    /// time since `e₁`, the steps inside the band included; added to the output and limited;
+    /// a step inside the band changes nothing, its error included.
     #[test]
     fn incremental_pid_follows_the_velocity_form(
         (kp, ki, kd) in (-100.0f32..100.0, -1.0e3f32..1.0e3, -1.0f32..1.0),
@@ -297,18 +298,24 @@ proptest! {
     ) {
         let cfg = IncrementalPidConfig::new(kp, ki, kd).with_output_limit(out_limit).with_deadband(deadband);
         let mut pid = IncrementalPid::new(cfg).unwrap();
-        let mut history: Option<(f64, f64)> = None;
+        // (e₁, ė₁, Δt of ė₁), and the time since e₁.
+        let mut history: Option<(f64, f64, f64)> = None;
+        let mut since = 0.0f64;
         let mut u = 0.0f64;
         for (target, meas, dt) in steps {
             let t = pid.update(target, meas, dt);
             // In or out of the band as the f32 error is; the terms from the exact error.
             let outside = (target - meas).abs() > deadband || deadband == 0.0;
             let e = f64::from(target) - f64::from(meas);
-            let (e1, e2) = history.unwrap_or((e, e));
             let dt = f64::from(dt);
+            since += dt;
+            let (e1, rate1, span1) = history.unwrap_or((e, 0.0, f64::INFINITY));
+            let span = since;
             let (p, i, d) = if outside {
-                history = Some((e, e1));
-                (f64::from(kp) * (e - e1), f64::from(ki) * e * dt, f64::from(kd) * (e - 2.0 * e1 + e2) / dt)
+                let rate = (e - e1) / since;
+                history = Some((e, rate, since));
+                since = 0.0;
+                (f64::from(kp) * (e - e1), f64::from(ki) * e * dt, f64::from(kd) * (rate - rate1))
             } else {
                 (0.0, 0.0, 0.0)
             };
@@ -316,7 +323,10 @@ proptest! {
             let tol = |v: f64, gain: f32, per: f64| 4.0 * 8e-6 * f64::from(gain.abs()) * per + 1e-5 * v.abs();
             prop_assert!((f64::from(t.p) - p).abs() <= tol(p, kp, 1.0), "p {} want {p}", t.p);
             prop_assert!((f64::from(t.i) - i).abs() <= tol(i, ki, dt), "i {} want {i}", t.i);
-            prop_assert!((f64::from(t.d) - d).abs() <= tol(d, kd, 1.0 / dt), "d {} want {d}", t.d);
+            // Each rate: its errors' rounding over its span, and a few roundings of itself.
+            let d_tol = tol(0.0, kd, 1.0 / span + 1.0 / span1)
+                + 1e-6 * f64::from(kd.abs()) * ((e - e1) / span).abs().max(rate1.abs()) + 1e-5 * d.abs();
+            prop_assert!((f64::from(t.d) - d).abs() <= d_tol, "d {} want {d}", t.d);
             let (tp, ti, td) = (f64::from(t.p), f64::from(t.i), f64::from(t.d));
             let want = (u + tp + ti + td).clamp(-f64::from(out_limit), f64::from(out_limit));
             // Three f32 additions: a few roundings of the largest partial sum.
