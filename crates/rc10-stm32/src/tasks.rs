@@ -21,7 +21,7 @@ pub type G4Bus = Bus<'static, MAX_NODES>;
 /// application tasks in thread mode never delay a tick.
 #[embassy_executor::task(pool_size = 3)]
 pub async fn scheduler_task(bus: &'static G4Bus, tx: FdcanTx) -> ! {
-    run_scheduler(bus, tx, bus.config().tick_period).await
+    run_scheduler(bus, tx).await
 }
 
 /// The receiver of one bus: routes each frame to the node that claims it (rc10-core's

@@ -64,7 +64,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 pub struct BusConfig {
     /// Nominal bitrate in bits per second (1 Mbit/s for DJI motors).
     pub bitrate_bps: u32,
-    /// Scheduler tick period (1 ms).
+    /// Scheduler tick period (1 ms): [`run_scheduler`] ticks at it.
     pub tick_period: Duration,
     /// Registration fails when the nominal (unstuffed) load of all declared traffic would
     /// exceed this, in percent. 90 % admits six DJI motors (89 %) and rejects seven (100 %),
@@ -770,7 +770,7 @@ pub struct PacedTick {
 /// ```
 /// use rc10_core::bus::TickPacer;
 /// use rc10_core::time::{Duration, Instant};
-/// let mut pacer = TickPacer::new(Duration::from_millis(1));
+/// let mut pacer = TickPacer::new(bus.config().tick_period);
 /// pacer.on_tick(Instant::from_millis(0));
 /// let late = pacer.on_tick(Instant::from_millis(50)); // a 49 ms stall
 /// assert!(late.resync);
@@ -835,27 +835,27 @@ impl TickPacer {
     }
 }
 
-/// The scheduler task's loop: every `period` from an embassy-time `Ticker`, [`Bus::tick`] then
-/// [`Bus::transmit`]. Timing follows [`TickPacer`]: `dt` stays within
-/// `[period / 2, 10 · period]`, and after a stall the missed ticks are skipped (counted in
-/// `ticks_skipped`), not run back to back.
-pub async fn run_scheduler<T: CanTransmit, const N: usize>(
-    bus: &Bus<'_, N>,
-    tx: T,
-    period: Duration,
-) -> ! {
-    run_scheduler_on(bus, tx, TickerTicks::every(period), period).await
+/// The scheduler task's loop: every [`BusConfig::tick_period`] of the bus from an
+/// embassy-time `Ticker`, [`Bus::tick`] then [`Bus::transmit`]. Timing follows
+/// [`TickPacer`]: `dt` stays within `[period / 2, 10 · period]`, and after a stall the
+/// missed ticks are skipped (counted in `ticks_skipped`), not run back to back.
+///
+/// The period is the bus's own, so the ticks, the `dt` the controllers get and the load
+/// figures registration checked against ([`BusConfig`]) cannot disagree.
+pub async fn run_scheduler<T: CanTransmit, const N: usize>(bus: &Bus<'_, N>, tx: T) -> ! {
+    let period = bus.config().tick_period;
+    run_scheduler_on(bus, tx, TickerTicks::every(period)).await
 }
 
 /// [`run_scheduler`] with the ticks taken from `ticks` (a fake clock in tests, or your own
-/// timer).
+/// timer), which should come every [`BusConfig::tick_period`] of the bus: the pacer holds
+/// `dt` to that period's bounds and counts ticks later than it as skipped.
 pub async fn run_scheduler_on<T: CanTransmit, S: TickSource, const N: usize>(
     bus: &Bus<'_, N>,
     mut tx: T,
     mut ticks: S,
-    period: Duration,
 ) -> ! {
-    let mut pacer = TickPacer::new(period);
+    let mut pacer = TickPacer::new(bus.config().tick_period);
     let mut batch = TxBatch::new();
     loop {
         let now = ticks.next_tick().await;

@@ -815,8 +815,7 @@ fn scheduler_after_a_stall_skips_missed_ticks_instead_of_bursting() {
         stall_us: 50_000,
     };
     let sent = Cell::new(0u32);
-    let period = Duration::from_millis(1);
-    let mut fut = pin!(run_scheduler_on(&bus, CountingTx(&sent), ticker, period));
+    let mut fut = pin!(run_scheduler_on(&bus, CountingTx(&sent), ticker));
     let mut cx = Context::from_waker(Waker::noop());
     assert!(fut.as_mut().poll(&mut cx).is_pending()); // ran the 200 ticks, then waits
     let calls = probe.calls.lock().unwrap().clone();
@@ -831,6 +830,43 @@ fn scheduler_after_a_stall_skips_missed_ticks_instead_of_bursting() {
     }
     let skipped = bus.stats().snapshot().ticks_skipped;
     assert!((49..=50).contains(&skipped), "skipped {skipped}");
+}
+
+#[test]
+fn scheduler_ticks_at_the_bus_configured_period() {
+    // A bus configured for a 2 ms tick: the scheduler's pacer takes the period from the
+    // bus, so ticks 2 ms apart are on time (dt 2 ms, none skipped). A pacer at 1 ms would
+    // count one skipped tick per tick and clamp dt to its own bounds.
+    let probe = DtProbe {
+        calls: StdMutex::new(Vec::new()),
+    };
+    let config = BusConfig {
+        tick_period: Duration::from_millis(2),
+        ..BusConfig::DEFAULT
+    };
+    let mut builder = BusBuilder::<1>::with_config(config);
+    builder.register(&probe).unwrap();
+    let bus = builder.build();
+    let clock = Cell::new(0u64);
+    let ticker = FakeTicker {
+        now_us: &clock,
+        due_us: 2_000,
+        period_us: 2_000,
+        ticks: 0,
+        limit: 50,
+        stall_at: 0,
+        stall_us: 0,
+    };
+    let sent = Cell::new(0u32);
+    let mut fut = pin!(run_scheduler_on(&bus, CountingTx(&sent), ticker));
+    let mut cx = Context::from_waker(Waker::noop());
+    assert!(fut.as_mut().poll(&mut cx).is_pending());
+    let calls = probe.calls.lock().unwrap().clone();
+    assert_eq!(calls.len(), 50);
+    for (t, dt) in calls.iter().skip(1) {
+        assert!((dt - 0.002).abs() < 1e-5, "dt {dt} s at {t} µs");
+    }
+    assert_eq!(bus.stats().snapshot().ticks_skipped, 0);
 }
 
 #[test]

@@ -59,7 +59,7 @@ impl CanReceive for ChannelRx {
 
 #[embassy_executor::task]
 async fn scheduler(bus: &'static Bus<'static, 4>) {
-    run_scheduler(bus, RecordingTx, Duration::from_millis(1)).await
+    run_scheduler(bus, RecordingTx).await
 }
 
 #[embassy_executor::task]
