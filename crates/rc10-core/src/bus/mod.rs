@@ -770,7 +770,7 @@ pub struct PacedTick {
 /// ```
 /// use rc10_core::bus::TickPacer;
 /// use rc10_core::time::{Duration, Instant};
-/// let mut pacer = TickPacer::new(bus.config().tick_period);
+/// let mut pacer = TickPacer::new(Duration::from_millis(1));
 /// pacer.on_tick(Instant::from_millis(0));
 /// let late = pacer.on_tick(Instant::from_millis(50)); // a 49 ms stall
 /// assert!(late.resync);
