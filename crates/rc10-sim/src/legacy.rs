@@ -34,7 +34,8 @@ struct LoopState {
 /// own [`IncrementalPid`](rc10_core::pid::IncrementalPid), which differs on purpose: the
 /// error history starts at zero (the first step kicks by kp·e) and shifts on every call,
 /// inside the deadband too (rc10 leaves it alone there), while the output moves only
-/// outside the band.
+/// outside the band; its D term is the fixed-dt `kd·(e − 2e₁ + e₂)/dt` (rc10 takes the change of
+/// `kd·ė` over the time since the last error outside the band; the demo's kd is 0).
 #[derive(Debug, Default)]
 struct LegacyPid {
     /// Output, mA.

@@ -99,12 +99,18 @@ impl IncrementalPidConfig {
 /// to the output, which is limited to `±output_limit`; `ė[k] = (e[k] - e[k-1]) / Δt[k]` is the
 /// error's rate over the time `Δt[k]` since `e[k-1]`.
 ///
-/// At a fixed `dt` the D increment is the textbook `kd·(e[k] - 2e[k-1] + e[k-2]) / dt`. Taken
-/// as a difference of rates, the D increments add up to `kd·ė[k]` whatever the steps' `dt`
-/// (the textbook form drifts without bound when `dt` varies), and a step that leaves the
-/// deadband measures the rate over the whole time since the error was last outside it
-/// rather than over one `dt` (no spike). A changed `kd` ([`set_config`](Self::set_config))
-/// takes the D part of the output to the new `kd·ė` in one step.
+/// At a fixed `dt`, away from the deadband's edge, the D increment is the textbook
+/// `kd·(e[k] - 2e[k-1] + e[k-2]) / dt` (up to rounding). Taken as a difference of rates, the D
+/// increments add up to `kd·ė[k]` whatever the steps' `dt` (the textbook form drifts without
+/// bound when `dt` varies), and a step that leaves the deadband measures the rate over the
+/// whole time since the error was last outside it rather than over one `dt` (no spike; this
+/// step and the next differ from the textbook form). The D part is kept within
+/// `±output_limit`: an absurdly short `dt` cannot leave a rate behind that swings the output
+/// from one limit to the other on the next step.
+///
+/// A changed `kd` ([`set_config`](Self::set_config)) is bumpless, as a changed `kp` is: the
+/// increments follow the new gain from the next step on. (Switching `kd` on from 0 adds
+/// `kd·ė` once: the rate is not kept while `kd` is 0.)
 ///
 /// With a TD, `e = tracked target - measurement`, where the TD follows the target smoothly
 /// (so a target step does not kick P and D). On the first step after construction or
@@ -125,7 +131,8 @@ pub struct IncrementalPid {
     band: f32,
     td: Option<TrackingDifferentiator>,
     output: f32,
-    /// The last error outside the deadband, and the D part of the output then (`kd·ė`).
+    /// The last error outside the deadband, and `kd·ė` then (with the present `kd`, within
+    /// ±the capped output limit).
     history: Option<(f32, f32)>,
     /// Seconds since the error in `history` (valid `dt`s of the steps inside the band).
     since_s: f32,
@@ -183,6 +190,14 @@ impl IncrementalPid {
                 td.continue_from(previous);
             }
         }
+        if let Some((_, d_part)) = &mut self.history {
+            if config.kd != self.config.kd {
+                // Bumpless: the next increment is the new kd times the change of rate. (From
+                // kd = 0 the kept part is 0 and stays 0: 0 · ∞ is NaN, which `finite` makes 0.)
+                *d_part = finite(*d_part * (config.kd / self.config.kd));
+            }
+            *d_part = clamp_abs(*d_part, below(config.output_limit, f32::MAX));
+        }
         self.config = config;
         self.band = fresh.band;
         self.output = saturate(self.output, config.output_limit);
@@ -233,17 +248,18 @@ impl IncrementalPid {
             };
             return self.last;
         }
+        let limit = below(c.output_limit, f32::MAX);
         // kd = 0 (the usual speed loop): no divide.
         let d_now = if c.kd == 0.0 {
             0.0
         } else {
-            finite(c.kd * (e - e1) / since_s)
+            clamp_abs(finite(c.kd * (e - e1) / since_s), limit)
         };
         let p = finite(c.kp * (e - e1));
         let i = finite(c.ki * e * dt_s);
         let d = finite(d_now - d_before);
         // Finite terms: the sum is finite or ±inf, never NaN, and the capped limit is finite.
-        self.output = clamp_abs(self.output + p + i + d, below(c.output_limit, f32::MAX));
+        self.output = clamp_abs(self.output + p + i + d, limit);
         self.history = Some((e, d_now));
         self.since_s = 0.0;
         self.last = PidTerms {
@@ -363,9 +379,9 @@ mod tests {
     #[test]
     fn increments_follow_velocity_form_by_hand() {
         // kp 2, ki 100/s, kd 0.001 s; errors 10, 12, 11 at dt 1 ms.
-        // k1: history (10,10): p 0, i 1.0, d 0                    → u 1.0
-        // k2: p 2·2 = 4, i 1.2, d 0.001·(12 - 20 + 10)/0.001 = 2  → u 8.2
-        // k3: p 2·(-1) = -2, i 1.1, d (11 - 24 + 10) = -3         → u 4.3
+        // k1: p 0, i 1.0, d 0 (no rate yet)                          → u 1.0
+        // k2: p 2·2 = 4, i 1.2; ė 2/ms: D part 2, d = 2 − 0 = 2       → u 8.2
+        // k3: p 2·(-1) = -2, i 1.1; ė −1/ms: D part −1, d = −1 − 2 = −3 → u 4.3
         let mut c = IncrementalPid::new(IncrementalPidConfig::new(2.0, 100.0, 0.001)).unwrap();
         assert!((c.update(10.0, 0.0, DT).output - 1.0).abs() < 1e-5);
         assert!((c.update(12.0, 0.0, DT).output - 8.2).abs() < 1e-4);
@@ -423,21 +439,48 @@ mod tests {
     }
 
     #[test]
-    fn a_new_kd_takes_the_d_part_to_the_new_gain_times_the_rate() {
-        // Ramp at 1 a ms: D part kd·ė = 0.001 · 1000 = 1; with kd 0.003 it becomes 3 in the
-        // first step (increment 3 − 1 = 2), and 0 in the first step with kd 0.
+    fn a_new_kd_is_bumpless_and_the_increments_follow_it() {
+        // kp = ki = 0, so the output is the sum of the D increments.
         let mut c = IncrementalPid::new(IncrementalPidConfig::new(0.0, 0.0, 0.001)).unwrap();
-        for k in 0..5 {
-            c.update(k as f32, 0.0, DT);
+        let mut e = 0.0;
+        let mut ramp = |c: &mut IncrementalPid, per_ms: f32, kd: Option<f32>| {
+            if let Some(kd) = kd {
+                c.set_config(IncrementalPidConfig::new(0.0, 0.0, kd))
+                    .unwrap();
+            }
+            e += per_ms;
+            c.update(e, 0.0, DT).output
+        };
+        for _ in 0..5 {
+            ramp(&mut c, 1.0, None);
         }
-        assert!((c.output() - 1.0).abs() < 1e-4);
-        c.set_config(IncrementalPidConfig::new(0.0, 0.0, 0.003))
-            .unwrap();
-        assert!((c.update(5.0, 0.0, DT).output - 3.0).abs() < 1e-4);
-        assert!((c.update(6.0, 0.0, DT).output - 3.0).abs() < 1e-4);
-        c.set_config(IncrementalPidConfig::new(0.0, 0.0, 0.0))
-            .unwrap();
-        assert!(c.update(7.0, 0.0, DT).output.abs() < 1e-4);
+        assert!((c.output() - 1.0).abs() < 1e-4); // kd·ė = 0.001 · 1000/s
+        // kd 0.003 on the same ramp: no step (it jumped to 3 when the new gain applied to
+        // the whole rate at once).
+        assert!((ramp(&mut c, 1.0, Some(0.003)) - 1.0).abs() < 1e-4);
+        // The ramp steepens to 2/ms: 0.003 · (2000 − 1000)/s = +3.
+        assert!((ramp(&mut c, 2.0, None) - 4.0).abs() < 1e-3);
+        // kd 0: nothing more from D, and no step either.
+        assert!((ramp(&mut c, 2.0, Some(0.0)) - 4.0).abs() < 1e-3);
+        assert!((ramp(&mut c, 3.0, None) - 4.0).abs() < 1e-3);
+        // Switched on from 0: the rate was not kept, so kd·ė is added once (0.001 · 3000/s).
+        assert!((ramp(&mut c, 3.0, Some(0.001)) - 7.0).abs() < 1e-3);
+        assert!((ramp(&mut c, 3.0, None) - 7.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn an_absurdly_short_dt_cannot_swing_the_output_to_the_other_limit() {
+        // kd 0.001 s, limit 10: errors 0, 1 at 1 ms (D part 1), then 1.5 after 10⁻³⁰ s (a
+        // rate of 5·10²⁹/s: the output goes to the limit), then 2 after 1 ms: ė 500/s, so the
+        // D part, and with kp = ki = 0 the output, is 0.5. (Had the D part kept the absurd
+        // rate, the last step would subtract f32::MAX and land on −10.)
+        let mut c =
+            IncrementalPid::new(IncrementalPidConfig::new(0.0, 0.0, 0.001).with_output_limit(10.0))
+                .unwrap();
+        c.update(0.0, 0.0, DT);
+        assert!((c.update(1.0, 0.0, DT).output - 1.0).abs() < 1e-4);
+        assert_eq!(c.update(1.5, 0.0, 1e-30).output, 10.0);
+        assert!((c.update(2.0, 0.0, DT).output - 0.5).abs() < 1e-4);
     }
 
     #[test]

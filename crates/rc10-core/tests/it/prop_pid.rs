@@ -284,38 +284,58 @@ proptest! {
         }
     }
 
-    /// Without TD, for moderate inputs and valid dt, every increment is the velocity form
-    /// `kp·(e − e₁) + ki·e·dt + kd·(ė − ė₁)` over the errors outside the deadband (history
-    /// starting from the first of them, at rate 0), where `ė = (e − e₁)/Δt` and `Δt` is the
-    /// time since `e₁`, the steps inside the band included; added to the output and limited;
-    /// a step inside the band changes nothing, its error included.
+    /// Without TD, for moderate inputs, every increment is the velocity form
+    /// `kp·(e − e₁) + ki·e·dt + D − D₁` over the errors outside the deadband (history
+    /// starting from the first of them, at D part 0), where the D part `D = kd·ė` limited to
+    /// `±output_limit`, `ė = (e − e₁)/Δt` and `Δt` is the time since `e₁`, the steps inside
+    /// the band included; added to the output and limited;
+    /// a step inside the band changes nothing, its error included; a step with an invalid dt
+    /// (NaN, zero, negative) changes nothing and adds no time. Measurements are often drawn
+    /// near the target, so that runs of steps inside the band occur.
     #[test]
     fn incremental_pid_follows_the_velocity_form(
         (kp, ki, kd) in (-100.0f32..100.0, -1.0e3f32..1.0e3, -1.0f32..1.0),
         out_limit in 1.0f32..1.0e5,
         deadband in prop_oneof![Just(0.0f32), 0.0f32..5.0],
-        steps in proptest::collection::vec((-100.0f32..100.0, -100.0f32..100.0, 1.0e-4f32..0.01), 1..60),
+        steps in proptest::collection::vec(
+            (
+                -100.0f32..100.0,
+                -100.0f32..100.0,
+                any::<bool>(),
+                prop_oneof![8 => 1.0e-4f32..0.01, 1 => Just(f32::NAN), 1 => -0.01f32..=0.0],
+            ),
+            1..60,
+        ),
     ) {
         let cfg = IncrementalPidConfig::new(kp, ki, kd).with_output_limit(out_limit).with_deadband(deadband);
         let mut pid = IncrementalPid::new(cfg).unwrap();
-        // (e₁, ė₁, Δt of ė₁), and the time since e₁.
-        let mut history: Option<(f64, f64, f64)> = None;
+        // (e₁, D part then, ė₁, Δt of ė₁), and the time since e₁.
+        let mut history: Option<(f64, f64, f64, f64)> = None;
         let mut since = 0.0f64;
         let mut u = 0.0f64;
-        for (target, meas, dt) in steps {
+        for (target, far, near, dt) in steps {
+            // Near: within 1.5 deadbands of the target (inside the band two times in three).
+            let meas = if near { target + far / 100.0 * 1.5 * deadband } else { far };
             let t = pid.update(target, meas, dt);
+            if dt.is_nan() || dt <= 0.0 {
+                prop_assert_eq!(f64::from(t.output), u, "an invalid dt holds the output");
+                prop_assert_eq!((t.p, t.i, t.d), (0.0, 0.0, 0.0));
+                continue;
+            }
             // In or out of the band as the f32 error is; the terms from the exact error.
             let outside = (target - meas).abs() > deadband || deadband == 0.0;
             let e = f64::from(target) - f64::from(meas);
             let dt = f64::from(dt);
             since += dt;
-            let (e1, rate1, span1) = history.unwrap_or((e, 0.0, f64::INFINITY));
+            let (e1, d1, rate1, span1) = history.unwrap_or((e, 0.0, 0.0, f64::INFINITY));
             let span = since;
+            let limit = f64::from(out_limit);
             let (p, i, d) = if outside {
                 let rate = (e - e1) / since;
-                history = Some((e, rate, since));
+                let d_part = (f64::from(kd) * rate).clamp(-limit, limit);
+                history = Some((e, d_part, rate, since));
                 since = 0.0;
-                (f64::from(kp) * (e - e1), f64::from(ki) * e * dt, f64::from(kd) * (rate - rate1))
+                (f64::from(kp) * (e - e1), f64::from(ki) * e * dt, d_part - d1)
             } else {
                 (0.0, 0.0, 0.0)
             };
