@@ -412,6 +412,33 @@ fn remote_driven_mecanum_chassis_tracks_the_sticks_and_stops_on_radio_loss() {
 }
 
 #[test]
+fn a_dr16_frame_cut_short_by_the_radio_is_dropped() {
+    // The radio stops at 113 ms, in the middle of the frame that began at 112 ms (the first
+    // with the forward stick set at 100 ms): its first 9 bytes end by 112.99 ms, the rest are
+    // never sent. 9 bytes between two silences are no DBUS frame, so the robot never sees
+    // the forward stick: it keeps the last whole frame (98 ms, neutral) until the link is
+    // lost 100 ms after that frame's last byte (99.98 ms).
+    let mut s = example_file("mecanum-drive.toml");
+    s.duration_ms = 400;
+    if let Some(chassis) = &mut s.chassis {
+        chassis.radio_off = vec![(113, 400)];
+    }
+    let r = run(&s).unwrap();
+    let c: Vec<_> = r
+        .samples
+        .iter()
+        .map(|x| (x.t_ms, x.chassis.unwrap()))
+        .collect();
+    assert!(c.iter().all(|(_, x)| x.commanded.vx_m_s == 0.0));
+    let first_lost = c
+        .iter()
+        .filter(|(t, _)| *t > 50)
+        .find(|(_, x)| x.link_lost)
+        .map(|(t, _)| *t);
+    assert_eq!(first_lost, Some(200));
+}
+
+#[test]
 fn example_mecanum_file_drives_and_fails_safe() {
     let r = run(&example_file("mecanum-drive.toml")).unwrap();
     let c = |t: u64| {
@@ -422,12 +449,23 @@ fn example_mecanum_file_drives_and_fails_safe() {
             .chassis
             .unwrap()
     };
+    // The forward stick set at 100 ms goes out in the DR16 frame of 112 ms (one every
+    // 14 ms): 18 bytes of 110 µs end at 113.98 ms, and the frame counts once more than
+    // 2.5 ms of silence follow it, at the tick of 117 ms.
+    assert_eq!(c(116).commanded.vx_m_s, 0.0);
+    assert!(c(117).commanded.vx_m_s > 0.0, "{:?}", c(117));
     // Full forward: 2.5 m/s is 314 rpm per wheel, inside the 450 rpm limit.
     assert!((c(850).achieved.vx_m_s - 2.5).abs() < 0.06, "{:?}", c(850));
     // Full spin: 5 rad/s needs 0.38 · 5 / 0.076 rad/s = 239 rpm: reached by the end of the
-    // segment (the limiter takes 0.5 s to swap 2 m/s of strafe for 5 rad/s of spin).
+    // segment (the limiter takes 0.5 s to swap 2 m/s of strafe for 5 rad/s of spin; the
+    // loaded wheels overshoot the end of the ramp by about 3 %, which has decayed to about
+    // 2 % 80 ms later).
+    let peak = (2200..2300)
+        .map(|t| c(t).achieved.omega_rad_s)
+        .fold(0.0f32, f32::max);
+    assert!(peak < 5.0 * 1.05, "peak {peak}");
     assert!(
-        (c(2295).achieved.omega_rad_s - 5.0).abs() < 0.1,
+        (c(2295).achieved.omega_rad_s - 5.0).abs() < 0.12,
         "{:?}",
         c(2295)
     );

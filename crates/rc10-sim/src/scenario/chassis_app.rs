@@ -9,7 +9,12 @@ use rc10_core::remote::dbus::DbusReceiver;
 use rc10_core::time::{Duration, Instant};
 
 /// Robot firmware driving a mecanum chassis from a DR16 remote: each DBUS frame (every 14 ms)
-/// is encoded as the receiver sends it and parsed by rc10's `DbusReceiver`; the sticks become a
+/// is encoded as the receiver sends it and its bytes reach rc10's `DbusReceiver` one by one,
+/// each stamped with the end of its 110 µs on the 100 kbaud line, as rc10-stm32's UART task
+/// stamps them. So the frame counts, as on the robot, once the silence after it exceeds
+/// `remote::FRAME_GAP`: at the first tick more than 2.5 ms after its last byte, 5 ms after
+/// the frame began. A frame cut by the start of a `radio_off` window is dropped as too
+/// short. The sticks become a
 /// twist (left stick: vx, vy; right stick x: ω), limited by a `TwistLimiter`, turned into wheel
 /// rpm by rc10's mecanum kinematics (saturated together) and set on motors 1–4 (FL, FR, RL,
 /// RR). Achieved twist is the chassis's forward kinematics of the true wheel speeds (no slip;
@@ -26,7 +31,8 @@ pub struct ChassisDrive {
     pub max_wheel_rpm: f32,
     /// Stick positions from a time on (ms): right x, right y, left x, left y in −1…1.
     pub sticks: Vec<(u64, [f32; 4])>,
-    /// Windows `[from_ms, to_ms)` in which the receiver sends nothing.
+    /// Windows `[from_ms, to_ms)` in which the receiver sends nothing (a byte that would end
+    /// inside one is not sent).
     pub radio_off: Vec<(u64, u64)>,
 }
 
@@ -46,10 +52,15 @@ pub(super) struct ChassisApp {
     kinematics: LinearChassis<4>,
     limiter: TwistLimiter,
     receiver: DbusReceiver,
+    /// The DBUS frame on the line: when it began (µs), its bytes, how many have been read.
+    on_line: Option<(u64, [u8; 18], usize)>,
 }
 
 /// DR16 frame period.
 const DBUS_PERIOD_MS: u64 = 14;
+
+/// One DBUS byte on the line: 11 bits (start, 8 data, even parity, stop) at 100 kbaud, µs.
+const DBUS_BYTE_US: u64 = 110;
 
 /// The motors a chassis drives: the first four (FL, FR, RL, RR).
 pub(super) const CHASSIS_WHEELS: usize = 4;
@@ -71,6 +82,7 @@ impl ChassisApp {
             kinematics,
             limiter: TwistLimiter::new(drive.max_accel),
             receiver: DbusReceiver::new(Duration::from_millis(100)),
+            on_line: None,
         })
     }
 
@@ -82,11 +94,13 @@ impl ChassisApp {
         t_ms: u64,
         now: Instant,
     ) -> Result<ChassisSample, String> {
-        let radio_on = !drive
-            .radio_off
-            .iter()
-            .any(|(from, to)| in_window(t_ms, *from, *to));
-        if radio_on && t_ms.is_multiple_of(DBUS_PERIOD_MS) {
+        let radio_on = |ms: u64| {
+            !drive
+                .radio_off
+                .iter()
+                .any(|(from, to)| in_window(ms, *from, *to))
+        };
+        if radio_on(t_ms) && t_ms.is_multiple_of(DBUS_PERIOD_MS) {
             let sticks = drive
                 .sticks
                 .iter()
@@ -94,7 +108,20 @@ impl ChassisApp {
                 .find(|(at, _)| *at <= t_ms)
                 .map_or([0.0; 4], |(_, s)| *s);
             // The bytes a DR16 would send, parsed by rc10 as on the robot.
-            let _ = self.receiver.push_frame(&encode_dbus(sticks), now);
+            self.on_line = Some((now.as_micros(), encode_dbus(sticks), 0));
+        }
+        // The bytes that have ended on the line by now, as the UART task reads them.
+        if let Some((start_us, bytes, read)) = &mut self.on_line {
+            while let Some(&byte) = bytes.get(*read) {
+                let end_us = *start_us + (*read as u64 + 1) * DBUS_BYTE_US;
+                if end_us > now.as_micros() {
+                    break;
+                }
+                if radio_on(end_us / 1000) {
+                    let _ = self.receiver.push_byte(byte, Instant::from_micros(end_us));
+                }
+                *read += 1;
+            }
         }
         let signal = self.receiver.signal(now);
         let f = signal.value;
