@@ -417,7 +417,8 @@ fn a_dr16_frame_cut_short_by_the_radio_is_dropped() {
     // with the forward stick set at 100 ms): its first 9 bytes end by 112.99 ms, the rest are
     // never sent. 9 bytes between two silences are no DBUS frame, so the robot never sees
     // the forward stick: it keeps the last whole frame (98 ms, neutral) until the link is
-    // lost 100 ms after that frame's last byte (99.98 ms).
+    // lost 100 ms after that frame's last byte, read one idle character (110 µs) after it
+    // ended at 99.98 ms: at the tick after 200.09 ms.
     let mut s = example_file("mecanum-drive.toml");
     s.duration_ms = 400;
     if let Some(chassis) = &mut s.chassis {
@@ -435,7 +436,42 @@ fn a_dr16_frame_cut_short_by_the_radio_is_dropped() {
         .filter(|(t, _)| *t > 50)
         .find(|(_, x)| x.link_lost)
         .map(|(t, _)| *t);
-    assert_eq!(first_lost, Some(200));
+    assert_eq!(first_lost, Some(201));
+}
+
+#[test]
+fn a_bus_tick_period_the_simulator_does_not_run_is_refused() {
+    // rc10 would pace its ticks, dt and load figures at 2 ms while the simulation ticks
+    // every 1 ms.
+    let mut s = scenario("m3508-speed-step");
+    s.bus.tick_period = rc10_core::time::Duration::from_millis(2);
+    assert!(matches!(run(&s), Err(SimError::TickPeriod { us: 2000 })));
+}
+
+#[test]
+fn dr16_frames_sent_while_the_scheduler_stalls_are_read_after_it() {
+    // The scheduler stalls from 113 to 140 ms. The DR16 goes on sending: the frame of 112 ms
+    // (the first with the forward stick) and that of 126 ms are read at the 140 ms tick with
+    // their own stamps, and the second is proven whole by the silence after it (its last
+    // byte read at 128.09 ms), so the chassis moves forward from that tick on.
+    let mut s = example_file("mecanum-drive.toml");
+    s.duration_ms = 300;
+    s.faults.push(rc10_sim::scenario::Fault::SchedulerStall {
+        from_ms: 113,
+        to_ms: 140,
+    });
+    let r = run(&s).unwrap();
+    let c = |t: u64| {
+        r.samples
+            .iter()
+            .find(|x| x.t_ms == t)
+            .and_then(|x| x.chassis)
+            .unwrap()
+    };
+    assert_eq!(c(112).commanded.vx_m_s, 0.0);
+    assert!(r.samples.iter().all(|x| !(113..140).contains(&x.t_ms)));
+    assert!(c(140).commanded.vx_m_s > 0.0, "{:?}", c(140));
+    assert!(!c(140).link_lost);
 }
 
 #[test]
@@ -450,8 +486,8 @@ fn example_mecanum_file_drives_and_fails_safe() {
             .unwrap()
     };
     // The forward stick set at 100 ms goes out in the DR16 frame of 112 ms (one every
-    // 14 ms): 18 bytes of 110 µs end at 113.98 ms, and the frame counts once more than
-    // 2.5 ms of silence follow it, at the tick of 117 ms.
+    // 14 ms): 18 bytes of 110 µs end at 113.98 ms, read one idle character later (114.09),
+    // and the frame counts once more than 2.5 ms of silence follow, at the tick of 117 ms.
     assert_eq!(c(116).commanded.vx_m_s, 0.0);
     assert!(c(117).commanded.vx_m_s > 0.0, "{:?}", c(117));
     // Full forward: 2.5 m/s is 314 rpm per wheel, inside the 450 rpm limit.

@@ -10,11 +10,13 @@ use rc10_core::time::{Duration, Instant};
 
 /// Robot firmware driving a mecanum chassis from a DR16 remote: each DBUS frame (every 14 ms)
 /// is encoded as the receiver sends it and its bytes reach rc10's `DbusReceiver` one by one,
-/// each stamped with the end of its 110 µs on the 100 kbaud line, as rc10-stm32's UART task
-/// stamps them. So the frame counts, as on the robot, once the silence after it exceeds
-/// `remote::FRAME_GAP`: at the first tick more than 2.5 ms after its last byte, 5 ms after
-/// the frame began. A frame cut by the start of a `radio_off` window is dropped as too
-/// short. The sticks become a
+/// stamped as rc10-stm32's UART task stamps them: the UART's idle-line event comes one
+/// character (110 µs at 100 kbaud) after the last byte it read, and each byte is stamped that
+/// long after it ended on the line. So the frame counts, as on the robot, once the silence
+/// after it exceeds `remote::FRAME_GAP`: at the first tick more than 2.5 ms after its last
+/// byte's stamp, 5 ms after the frame began. A frame cut by the start of a `radio_off`
+/// window is dropped as too short. Frames due while the scheduler stalls are sent all the
+/// same and read, with their own stamps, at the next tick. The sticks become a
 /// twist (left stick: vx, vy; right stick x: ω), limited by a `TwistLimiter`, turned into wheel
 /// rpm by rc10's mecanum kinematics (saturated together) and set on motors 1–4 (FL, FR, RL,
 /// RR). Achieved twist is the chassis's forward kinematics of the true wheel speeds (no slip;
@@ -31,8 +33,9 @@ pub struct ChassisDrive {
     pub max_wheel_rpm: f32,
     /// Stick positions from a time on (ms): right x, right y, left x, left y in −1…1.
     pub sticks: Vec<(u64, [f32; 4])>,
-    /// Windows `[from_ms, to_ms)` in which the receiver sends nothing (a byte that would end
-    /// inside one is not sent).
+    /// Windows `[from_ms, to_ms)` in which the receiver sends nothing: a frame due inside one
+    /// is not sent, and a frame under way when one begins is cut (its bytes that would end
+    /// inside it are not sent).
     pub radio_off: Vec<(u64, u64)>,
 }
 
@@ -54,12 +57,15 @@ pub(super) struct ChassisApp {
     receiver: DbusReceiver,
     /// The DBUS frame on the line: when it began (µs), its bytes, how many have been read.
     on_line: Option<(u64, [u8; 18], usize)>,
+    /// When the next DBUS frame is due, µs.
+    next_frame_us: u64,
 }
 
 /// DR16 frame period.
 const DBUS_PERIOD_MS: u64 = 14;
 
 /// One DBUS byte on the line: 11 bits (start, 8 data, even parity, stop) at 100 kbaud, µs.
+/// Also how long after a byte the UART's idle-line event reads it (one idle character).
 const DBUS_BYTE_US: u64 = 110;
 
 /// The motors a chassis drives: the first four (FL, FR, RL, RR).
@@ -83,6 +89,7 @@ impl ChassisApp {
             limiter: TwistLimiter::new(drive.max_accel),
             receiver: DbusReceiver::new(Duration::from_millis(100)),
             on_line: None,
+            next_frame_us: 0,
         })
     }
 
@@ -91,7 +98,6 @@ impl ChassisApp {
         drive: &ChassisDrive,
         motors: &[Box<dyn SimMotor>],
         escs: &[DjiEsc],
-        t_ms: u64,
         now: Instant,
     ) -> Result<ChassisSample, String> {
         let radio_on = |ms: u64| {
@@ -100,28 +106,41 @@ impl ChassisApp {
                 .iter()
                 .any(|(from, to)| in_window(ms, *from, *to))
         };
-        if radio_on(t_ms) && t_ms.is_multiple_of(DBUS_PERIOD_MS) {
-            let sticks = drive
-                .sticks
-                .iter()
-                .rev()
-                .find(|(at, _)| *at <= t_ms)
-                .map_or([0.0; 4], |(_, s)| *s);
-            // The bytes a DR16 would send, parsed by rc10 as on the robot.
-            self.on_line = Some((now.as_micros(), encode_dbus(sticks), 0));
-        }
-        // The bytes that have ended on the line by now, as the UART task reads them.
-        if let Some((start_us, bytes, read)) = &mut self.on_line {
-            while let Some(&byte) = bytes.get(*read) {
-                let end_us = *start_us + (*read as u64 + 1) * DBUS_BYTE_US;
-                if end_us > now.as_micros() {
-                    break;
+        let now_us = now.as_micros();
+        loop {
+            // The bytes read by now, each stamped one idle character after it ended.
+            if let Some((start_us, bytes, read)) = &mut self.on_line {
+                while let Some(&byte) = bytes.get(*read) {
+                    let end_us = *start_us + (*read as u64 + 1) * DBUS_BYTE_US;
+                    let stamp_us = end_us + DBUS_BYTE_US;
+                    if stamp_us > now_us {
+                        break;
+                    }
+                    if radio_on(end_us / 1000) {
+                        let _ = self
+                            .receiver
+                            .push_byte(byte, Instant::from_micros(stamp_us));
+                    }
+                    *read += 1;
                 }
-                if radio_on(end_us / 1000) {
-                    let _ = self.receiver.push_byte(byte, Instant::from_micros(end_us));
-                }
-                *read += 1;
             }
+            // The next frame, if it is due (every one due since the last tick, after a
+            // stall). The one before is read by then: 18 bytes take 2 ms of the 14.
+            if self.next_frame_us > now_us {
+                break;
+            }
+            let start_ms = self.next_frame_us / 1000;
+            self.on_line = radio_on(start_ms).then(|| {
+                let sticks = drive
+                    .sticks
+                    .iter()
+                    .rev()
+                    .find(|(at, _)| *at <= start_ms)
+                    .map_or([0.0; 4], |(_, s)| *s);
+                // The bytes a DR16 would send, parsed by rc10 as on the robot.
+                (self.next_frame_us, encode_dbus(sticks), 0)
+            });
+            self.next_frame_us += DBUS_PERIOD_MS * 1000;
         }
         let signal = self.receiver.signal(now);
         let f = signal.value;

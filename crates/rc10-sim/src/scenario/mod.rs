@@ -103,7 +103,8 @@ pub struct Scenario {
     pub targets: Vec<TargetSpec>,
     /// Injected faults.
     pub faults: Vec<Fault>,
-    /// rc10 bus configuration (bitrate, registration budget).
+    /// rc10 bus configuration (bitrate, registration budget). The simulator ticks every
+    /// 1 ms: a `tick_period` other than 1 ms is refused ([`SimError::TickPeriod`]).
     pub bus: BusConfig,
     /// Order in which the simulated controller sends its pending TX frames (the FDCAN's TX
     /// FIFO or TX queue mode); [`TxOrder::Fifo`], as rc10-stm32 configures the FDCAN, by
@@ -140,6 +141,13 @@ pub enum SimError {
     /// The motors' feedback IDs need more acceptance-filter elements than an STM32G4's
     /// FDCAN has (rc10-stm32's `start_can` would refuse the bus).
     Filters(PlanError),
+    /// The bus configuration's `tick_period` (µs) is not the simulator's 1 ms tick: rc10's
+    /// scheduler would pace ticks, `dt` and the load figures at a period the simulation
+    /// does not run.
+    TickPeriod {
+        /// The configured period, µs.
+        us: u64,
+    },
 }
 
 impl fmt::Display for SimError {
@@ -151,6 +159,10 @@ impl fmt::Display for SimError {
             }
             Self::Target { target, reason } => write!(f, "target {target}: {reason}"),
             Self::Filters(error) => write!(f, "the motors do not fit the FDCAN's filters: {error}"),
+            Self::TickPeriod { us } => write!(
+                f,
+                "bus tick period {us} µs: the simulator ticks every 1000 µs"
+            ),
         }
     }
 }

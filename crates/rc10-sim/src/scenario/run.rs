@@ -105,7 +105,8 @@ fn after_scheduler_stall(scenario: &Scenario, t_us: u64) -> u64 {
 /// handed to rc10 and every tick, and keeping only the samples it asks for
 /// ([`RunObserver::keep_sample`]).
 ///
-/// Ticks are paced by rc10's own `TickPacer`, as `run_scheduler` paces them on a board:
+/// Ticks come every 1 ms (a scenario whose `bus.tick_period` differs is refused) and are
+/// paced by rc10's own `TickPacer`, as `run_scheduler` paces them on a board:
 /// `dt` is the period, except after a [`Fault::SchedulerStall`], when the late tick's `dt` is
 /// bounded and the missed ticks are counted as skipped.
 pub fn run_observed(
@@ -113,6 +114,10 @@ pub fn run_observed(
     progress: &mut dyn FnMut(u64),
     observer: &mut dyn RunObserver,
 ) -> Result<RunResult, SimError> {
+    let tick_us = scenario.bus.tick_period.as_micros();
+    if tick_us != TICK_US {
+        return Err(SimError::TickPeriod { us: tick_us });
+    }
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(scenario.seed);
     let motors: Vec<Box<dyn SimMotor>> = scenario
         .motors
@@ -309,7 +314,7 @@ pub fn run_observed(
             let now = Instant::from_micros(t);
             let chassis = match (&mut app, &scenario.chassis) {
                 (Some(app), Some(drive)) => Some(
-                    app.step(drive, &motors, &escs, t_ms, now)
+                    app.step(drive, &motors, &escs, now)
                         .map_err(|reason| SimError::Target { target: 0, reason })?,
                 ),
                 _ => None,
