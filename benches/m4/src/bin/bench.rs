@@ -249,23 +249,21 @@ fn main() -> ! {
     .unwrap_or_else(|_| unreachable!());
     for (i, slot) in s.iter_mut().enumerate() {
         let m = (i % 97) as f32;
-        *slot = f.cal.instructions(ticks(|| {
-            positional_step(&mut pid, m)
-        }));
+        *slot = f.cal.instructions(ticks(|| positional_step(&mut pid, m)));
     }
     f.row("pid_positional", &mut s, Stat::Median);
     for (i, slot) in s.iter_mut().enumerate() {
         let m = (i % 97) as f32;
-        *slot = f.cal.instructions(ticks(|| {
-            incremental_step(&mut incremental, m)
-        }));
+        *slot = f
+            .cal
+            .instructions(ticks(|| incremental_step(&mut incremental, m)));
     }
     f.row("pid_incremental", &mut s, Stat::Median);
     for (i, slot) in s.iter_mut().enumerate() {
         let m = (i % 97) as f32;
-        *slot = f.cal.instructions(ticks(|| {
-            incremental_step(&mut with_td, m)
-        }));
+        *slot = f
+            .cal
+            .instructions(ticks(|| incremental_step(&mut with_td, m)));
     }
     f.row("pid_incremental_td", &mut s, Stat::Median);
 
