@@ -796,31 +796,45 @@ impl CanTransmit for CountingTx<'_> {
     }
 }
 
-#[test]
-fn scheduler_after_a_stall_skips_missed_ticks_instead_of_bursting() {
+/// Runs `run_scheduler_on` for one `DtProbe` on a bus with `config`, ticked by a
+/// `FakeTicker` every `period_us` until `limit` ticks, held up `stall_us` before tick
+/// `stall_at` (0: never). Returns the probe's (time µs, dt s) calls, the frames sent and the
+/// ticks counted as skipped.
+fn run_fake_ticks(
+    config: BusConfig,
+    period_us: u64,
+    limit: u32,
+    (stall_at, stall_us): (u32, u64),
+) -> (Vec<(u64, f32)>, u32, u32) {
     let probe = DtProbe {
         calls: StdMutex::new(Vec::new()),
     };
-    let mut builder = BusBuilder::<1>::new();
+    let mut builder = BusBuilder::<1>::with_config(config);
     builder.register(&probe).unwrap();
     let bus = builder.build();
     let clock = Cell::new(0u64);
     let ticker = FakeTicker {
         now_us: &clock,
-        due_us: 1_000,
-        period_us: 1_000,
+        due_us: period_us,
+        period_us,
         ticks: 0,
-        limit: 200,
-        stall_at: 100,
-        stall_us: 50_000,
+        limit,
+        stall_at,
+        stall_us,
     };
     let sent = Cell::new(0u32);
     let mut fut = pin!(run_scheduler_on(&bus, CountingTx(&sent), ticker));
     let mut cx = Context::from_waker(Waker::noop());
-    assert!(fut.as_mut().poll(&mut cx).is_pending()); // ran the 200 ticks, then waits
+    assert!(fut.as_mut().poll(&mut cx).is_pending()); // ran the ticks, then waits
     let calls = probe.calls.lock().unwrap().clone();
+    (calls, sent.get(), bus.stats().snapshot().ticks_skipped)
+}
+
+#[test]
+fn scheduler_after_a_stall_skips_missed_ticks_instead_of_bursting() {
+    let (calls, sent, skipped) = run_fake_ticks(BusConfig::DEFAULT, 1_000, 200, (100, 50_000));
     assert_eq!(calls.len(), 200);
-    assert_eq!(sent.get(), 200); // one frame per tick, no extra
+    assert_eq!(sent, 200); // one frame per tick, no extra
     for (t, dt) in &calls {
         assert!((0.0005..=0.010).contains(dt), "dt {dt} s at {t} µs");
     }
@@ -828,7 +842,6 @@ fn scheduler_after_a_stall_skips_missed_ticks_instead_of_bursting() {
     for pair in calls.windows(2) {
         assert!(pair[1].0 - pair[0].0 >= 900, "{:?}", pair);
     }
-    let skipped = bus.stats().snapshot().ticks_skipped;
     assert!((49..=50).contains(&skipped), "skipped {skipped}");
 }
 
@@ -838,36 +851,16 @@ fn scheduler_ticks_at_the_bus_configured_period() {
     // bus, so ticks 2 ms apart are on time (dt 2 ms from the first, which is the nominal
     // period; none skipped). A pacer at 1 ms would give the first tick a dt of 1 ms and count
     // each later one a period late.
-    let probe = DtProbe {
-        calls: StdMutex::new(Vec::new()),
-    };
     let config = BusConfig {
         tick_period: Duration::from_millis(2),
         ..BusConfig::DEFAULT
     };
-    let mut builder = BusBuilder::<1>::with_config(config);
-    builder.register(&probe).unwrap();
-    let bus = builder.build();
-    let clock = Cell::new(0u64);
-    let ticker = FakeTicker {
-        now_us: &clock,
-        due_us: 2_000,
-        period_us: 2_000,
-        ticks: 0,
-        limit: 50,
-        stall_at: 0,
-        stall_us: 0,
-    };
-    let sent = Cell::new(0u32);
-    let mut fut = pin!(run_scheduler_on(&bus, CountingTx(&sent), ticker));
-    let mut cx = Context::from_waker(Waker::noop());
-    assert!(fut.as_mut().poll(&mut cx).is_pending());
-    let calls = probe.calls.lock().unwrap().clone();
+    let (calls, _, skipped) = run_fake_ticks(config, 2_000, 50, (0, 0));
     assert_eq!(calls.len(), 50);
     for (t, dt) in &calls {
         assert!((dt - 0.002).abs() < 1e-5, "dt {dt} s at {t} µs");
     }
-    assert_eq!(bus.stats().snapshot().ticks_skipped, 0);
+    assert_eq!(skipped, 0);
 }
 
 #[test]

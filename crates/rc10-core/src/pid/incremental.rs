@@ -226,28 +226,23 @@ impl IncrementalPid {
             None => target,
         };
         let e = ErrorMode::Linear.diff(tracked, measurement);
-        let (e1, d_before) = self.history.unwrap_or((e, 0.0));
         let dt_ok = dt_valid(dt_s);
-        if !dt_ok {
-            // Held: no step, and no time passed for the rate.
+        if !dt_ok || e.abs() <= self.band {
+            // Held. An invalid dt adds no time; inside the deadband nothing happens but the
+            // clock: the P difference and the rate then span the steps outside the band only,
+            // and a target that dithers across the band edge cannot ratchet the output by
+            // kp·(e − e_in-band) each time.
+            if dt_ok {
+                self.since_s += dt_s;
+            }
             self.last = PidTerms {
                 output: self.output,
                 ..PidTerms::ZERO
             };
             return self.last;
         }
+        let (e1, d_before) = self.history.unwrap_or((e, 0.0));
         let since_s = self.since_s + dt_s;
-        if e.abs() <= self.band {
-            // Inside the deadband nothing happens but the clock: the P difference and the
-            // rate then span the steps outside the band only, and a target that dithers
-            // across the band edge cannot ratchet the output by kp·(e − e_in-band) each time.
-            self.since_s = since_s;
-            self.last = PidTerms {
-                output: self.output,
-                ..PidTerms::ZERO
-            };
-            return self.last;
-        }
         let limit = below(c.output_limit, f32::MAX);
         // kd = 0 (the usual speed loop): no divide.
         let d_now = if c.kd == 0.0 {
