@@ -15,6 +15,8 @@
 //! angle_pid = { kp = 3.0, output_limit = 250.0 }                       # optional
 //! angle_divider = 10                                                   # optional
 //! load = { inertia_kg_m2 = 0.01, torque_nm = 0.0, step = { at_ms = 400, torque_nm = 0.5 } }
+//! # torque_nm: against positive rotation whatever the motion (gravity); friction_nm = 0.05
+//! # instead for a wheel's rolling resistance (it opposes the motion, whichever way)
 //!
 //! [[target]]
 //! motor = 1                       # the first [[motor]] (1-based, in file order)
@@ -222,6 +224,8 @@ struct FileLoad {
     inertia_kg_m2: f64,
     #[serde(default)]
     torque_nm: f64,
+    #[serde(default)]
+    friction_nm: f64,
     #[serde(default)]
     step: Option<FileTorqueStep>,
 }
@@ -628,16 +632,19 @@ fn motor_spec(n: usize, m: &FileMotor) -> Result<MotorSpec, FileError> {
     if !(l.inertia_kg_m2.is_finite()
         && l.inertia_kg_m2 >= 0.0
         && l.torque_nm.is_finite()
+        && l.friction_nm.is_finite()
+        && l.friction_nm >= 0.0
         && step_ok)
     {
         return Err(invalid(
             format!("motor[{n}].load"),
-            "inertia must be ≥ 0, torques finite and the step within a day",
+            "inertia and friction must be ≥ 0, torques finite and the step within a day",
         ));
     }
     let load = Load {
         inertia_kg_m2: l.inertia_kg_m2,
         torque_nm: l.torque_nm,
+        friction_nm: l.friction_nm,
         step: l.step.map(|s| (s.at_ms * 1000, s.torque_nm)),
     };
     let tuned = m.speed_pid.is_some() || m.angle_pid.is_some() || m.angle_divider.is_some();
@@ -819,6 +826,17 @@ mod tests {
             parse(&nan_step).unwrap_err(),
             FileError::Invalid { field, .. } if field == "motor[1].load"
         ));
+        // Friction that pushes (negative) or is not a number.
+        for friction in ["-0.1", "nan"] {
+            let text = MINIMAL.replace(
+                "id = 1",
+                &format!("id = 1\nload = {{ friction_nm = {friction} }}"),
+            );
+            assert!(matches!(
+                parse(&text).unwrap_err(),
+                FileError::Invalid { field, .. } if field == "motor[1].load"
+            ));
+        }
         // A delay past every clock (it wrapped to the past) and a run too long to time in µs.
         let huge_delay = with_fault(
             "kind = \"delay\"\ndelay_us = 18446744073709551615\nfrom_ms = 0\nto_ms = 10",
@@ -879,7 +897,7 @@ mod tests {
     fn gains_and_loads_are_applied() {
         let text = MINIMAL.replace(
             "id = 1",
-            "id = 1\nspeed_pid = { kp = 0.5, ki = 4.0 }\nangle_divider = 5\nload = { inertia_kg_m2 = 0.02, step = { at_ms = 50, torque_nm = 1.0 } }",
+            "id = 1\nspeed_pid = { kp = 0.5, ki = 4.0 }\nangle_divider = 5\nload = { inertia_kg_m2 = 0.02, friction_nm = 0.05, step = { at_ms = 50, torque_nm = 1.0 } }",
         );
         let s = parse(&text).unwrap();
         let Controller::Rc10With(cfg) = s.motors[0].controller else {
@@ -889,5 +907,6 @@ mod tests {
         assert_eq!(cfg.cascade.speed.output_limit, 20.0); // the ESC's range by default
         assert_eq!(cfg.cascade.angle_divider, 5);
         assert_eq!(s.motors[0].load.step, Some((50_000, 1.0)));
+        assert_eq!(s.motors[0].load.friction_nm, 0.05);
     }
 }

@@ -69,13 +69,15 @@ pub struct MotorParams {
     pub coulomb_nm: f64,
     /// How the ESC drives the motor.
     pub drive: Drive,
-    /// Raw command full scale: the raw value for full current/voltage, for feedback scaling.
+    /// Amps per count of the feedback frame's torque-current field (D4–5).
     pub feedback_amps_per_raw: f64,
     /// Winding resistance for copper losses, ohms (per phase).
     pub phase_resistance_ohm: f64,
-    /// Thermal resistance winding → ambient, K/W (derived).
+    /// Thermal resistance winding → ambient, K/W (derived from the rated current for the
+    /// M3508; estimates for the others, which publish no thermal data).
     pub thermal_resistance_k_per_w: f64,
-    /// Thermal capacity of the winding, J/K (derived).
+    /// Thermal capacity of the winding, J/K (as the resistance: derived for the M3508 from a
+    /// 10-minute time constant, estimates for the others).
     pub thermal_capacity_j_per_k: f64,
     /// Ambient temperature, °C.
     pub ambient_c: f64,
@@ -231,8 +233,14 @@ pub fn zero_torque_rpm(
 pub struct Load {
     /// Extra inertia at the output, kg·m².
     pub inertia_kg_m2: f64,
-    /// Constant opposing torque, N·m (positive opposes positive rotation).
+    /// Constant torque against positive rotation, N·m, whatever the motion: gravity on an
+    /// arm or a gimbal's unbalanced pitch, a spring's preload. Beyond the friction it turns
+    /// an unpowered shaft backwards. (Rolling resistance is [`friction_nm`](Self::friction_nm).)
     pub torque_nm: f64,
+    /// Friction at the output, N·m, on top of the motor's own (Coulomb): opposes the motion
+    /// whichever way the shaft turns, and holds it still until the drive exceeds it. Rolling
+    /// resistance of a wheel, a gearbox's or a bearing's drag.
+    pub friction_nm: f64,
     /// A torque step: `(time in µs, torque in N·m)` replacing `torque_nm` from then on.
     pub step: Option<(u64, f64)>,
 }
@@ -538,16 +546,17 @@ impl DjiEsc {
             let omega = self.omega;
             let viscous = p.viscous_nm_s_per_rad * omega;
             let moving = omega.abs() > 1e-6;
+            // The motor's own Coulomb friction and the load's.
+            let friction = p.coulomb_nm + self.load.friction_nm;
             let coulomb = if moving {
-                p.coulomb_nm * omega.signum()
+                friction * omega.signum()
             } else {
                 // Static friction holds the shaft until the drive exceeds it.
-                drive.clamp(-p.coulomb_nm, p.coulomb_nm)
+                drive.clamp(-friction, friction)
             };
             let next = omega + (drive - viscous - coulomb) * f.dt_per_inertia;
             // Friction stops the shaft; it does not reverse it.
-            self.omega = if moving && next.signum() != omega.signum() && drive.abs() <= p.coulomb_nm
-            {
+            self.omega = if moving && next.signum() != omega.signum() && drive.abs() <= friction {
                 0.0
             } else {
                 next
@@ -886,6 +895,43 @@ mod tests {
         }
         let n = esc.speed_rpm();
         assert!(n > 240.0 && n < 267.0, "n = {n}");
+    }
+
+    #[test]
+    fn load_friction_opposes_motion_either_way_and_never_reverses_the_shaft() {
+        let coast = |load: Load, omega0: f64, seconds: f64| {
+            let mut esc = DjiEsc::new(MotorParams::m3508(), 1, load, 0);
+            esc.set_powered(false);
+            esc.omega = omega0;
+            for k in 0..(seconds / 1e-4).round() as u64 {
+                esc.step(k * 100, 1e-4);
+            }
+            esc.omega
+        };
+        let wheel = Load {
+            inertia_kg_m2: 0.0231,
+            friction_nm: 0.05,
+            ..Load::default()
+        };
+        // J = 6.5e-3 + 0.0231 = 0.0296 kg·m², friction c = 0.03 + 0.05 N·m, viscous
+        // b = 2e-3 N·m·s/rad: ω(t) = (ω0 + c/b)·e^(−bt/J) − c/b; from 10 rad/s, 0.1 s later
+        // 50·e^(−0.006757) − 40 = 9.6633 rad/s, and the same backwards.
+        let forward = coast(wheel, 10.0, 0.1);
+        let backward = coast(wheel, -10.0, 0.1);
+        assert!((forward - 9.6633).abs() < 2e-3, "{forward}");
+        assert!((backward + 9.6633).abs() < 2e-3, "{backward}");
+        // It stops after J/b·ln(50/40) = 3.3 s and stays stopped; at rest it stays at rest.
+        assert_eq!(coast(wheel, 10.0, 4.0), 0.0);
+        assert_eq!(coast(wheel, 0.0, 1.0), 0.0);
+        // A constant torque of the same size (gravity, not friction) beats the motor's own
+        // 0.03 N·m and turns the unpowered shaft backwards: (−0.05 + 0.03)/J ≈ −0.68 rad/s².
+        let pulled = Load {
+            inertia_kg_m2: 0.0231,
+            torque_nm: 0.05,
+            ..Load::default()
+        };
+        let w = coast(pulled, 0.0, 1.0);
+        assert!(w < -0.6 && w > -0.7, "{w}");
     }
 
     #[test]

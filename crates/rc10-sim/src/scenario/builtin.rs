@@ -90,8 +90,8 @@ pub fn builtin() -> Vec<Scenario> {
                 esc_id: 1,
                 load: Load {
                     inertia_kg_m2: 0.01,
-                    torque_nm: 0.0,
                     step: Some((400_000, 0.5)),
+                    ..Load::default()
                 },
                 controller: Controller::Rc10,
             }],
@@ -178,12 +178,12 @@ pub fn builtin() -> Vec<Scenario> {
 /// A 16 kg RoboMaster-style mecanum chassis driven through a stick profile, with a radio loss.
 fn chassis_remote_drive(base: Scenario) -> Scenario {
     // Each 76 mm wheel carries a quarter of 16 kg: 4 kg · 0.076² = 0.0231 kg·m² at its shaft,
-    // and 0.05 N·m of rolling resistance.
+    // and 0.05 N·m of rolling resistance (friction: it opposes the wheel's motion).
     let wheel = |id| MotorSpec {
         load: Load {
             inertia_kg_m2: 0.0231,
-            torque_nm: 0.05,
-            step: None,
+            friction_nm: 0.05,
+            ..Load::default()
         },
         ..m3508(id, Controller::Rc10)
     };

@@ -91,8 +91,8 @@ fn m3508(esc_id: u8) -> MotorSpec {
         esc_id,
         load: Load {
             inertia_kg_m2: 0.0231,
-            torque_nm: 0.05,
-            step: None,
+            friction_nm: 0.05,
+            ..Load::default()
         },
         controller: Controller::Rc10,
     }
@@ -104,8 +104,7 @@ fn gm6020(esc_id: u8) -> MotorSpec {
         esc_id,
         load: Load {
             inertia_kg_m2: 0.01,
-            torque_nm: 0.0,
-            step: None,
+            ..Load::default()
         },
         controller: Controller::Rc10,
     }
