@@ -16,6 +16,9 @@ pub const RC10_DEMO_SPEED_PID: IncrementalPidConfig = IncrementalPidConfig::new(
     .with_deadband(5.0)
     .with_output_limit(15_000.0);
 
+/// The `dt` RC10_LIB's PID hard-codes (`0.001f`): its `update()` is trusted to run at 1 kHz.
+const LEGACY_DT_S: f32 = 0.001;
+
 /// An M3508 driven by RC10_LIB's speed loop.
 #[derive(Debug)]
 pub struct LegacyM3508 {
@@ -45,18 +48,20 @@ struct LegacyPid {
 }
 
 impl LegacyPid {
-    /// One step with [`RC10_DEMO_SPEED_PID`]; returns the output in mA.
-    fn step(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
+    /// One step with [`RC10_DEMO_SPEED_PID`]; returns the output in mA. Like RC10_LIB's
+    /// `pid_calc`, it takes every call to be one 1 ms tick ([`LEGACY_DT_S`]), whatever time
+    /// passed: after a scheduler stall its integral grows by one tick's worth, not the stall's.
+    fn step(&mut self, target: f32, measurement: f32) -> f32 {
         let c = RC10_DEMO_SPEED_PID;
         let e = target - measurement;
         let (e1, e2) = self.history;
-        if dt_s > 0.0 && e.abs() > c.deadband {
+        if e.abs() > c.deadband {
             let p = c.kp * (e - e1);
-            let i = c.ki * e * dt_s;
+            let i = c.ki * e * LEGACY_DT_S;
             let d = if c.kd == 0.0 {
                 0.0
             } else {
-                c.kd * (e - 2.0 * e1 + e2) / dt_s
+                c.kd * (e - 2.0 * e1 + e2) / LEGACY_DT_S
             };
             self.output = (self.output + p + i + d).clamp(-c.output_limit, c.output_limit);
         }
@@ -100,7 +105,7 @@ impl CanNode for LegacyM3508 {
         let rpm = self.inner.speed_rpm();
         let milliamps = self.with_loop(|l| {
             let t = l.target?;
-            Some(l.pid.step(t, rpm, dt_s))
+            Some(l.pid.step(t, rpm))
         });
         if let Some(ma) = milliamps {
             let _ = self.inner.set_target_current(ma / 1000.0);
@@ -164,12 +169,24 @@ mod tests {
     fn the_comparison_pid_kicks_on_its_first_step_and_shifts_history_inside_the_band() {
         let mut pid = LegacyPid::default();
         // From a zero history: P = 18 · 300, I = 15 · 300 · 0.001.
-        assert!((pid.step(300.0, 0.0, 0.001) - 5404.5).abs() < 1e-3);
+        assert!((pid.step(300.0, 0.0) - 5404.5).abs() < 1e-3);
         let mut pid = LegacyPid::default();
-        pid.step(7.0, 0.0, 0.001); // 18 · 7 + 15 · 7 · 0.001 = 126.105
+        pid.step(7.0, 0.0); // 18 · 7 + 15 · 7 · 0.001 = 126.105
         // Inside the band: no output change, but the history takes the 3.
-        assert!((pid.step(3.0, 0.0, 0.001) - 126.105).abs() < 1e-3);
+        assert!((pid.step(3.0, 0.0) - 126.105).abs() < 1e-3);
         // Out again at 7: P = 18 · (7 − 3) = 72, I = 0.105.
-        assert!((pid.step(7.0, 0.0, 0.001) - 198.21).abs() < 1e-3);
+        assert!((pid.step(7.0, 0.0) - 198.21).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_comparison_loop_integrates_one_tick_per_call_after_a_stall() {
+        let motor = LegacyM3508::new(1).unwrap();
+        motor.set_target_rpm(100.0).unwrap();
+        // First call after a 50 ms stall: I = 15 · 100 · 0.001 (RC10_LIB's fixed dt), not
+        // 15 · 100 · 0.05; P = 18 · 100 from the zero history. 1801.5 mA.
+        motor.update(Instant::from_micros(50_000), 0.05);
+        // The current target the loop gave the DJI driver (its command stays 0: offline).
+        let amps = motor.inner.state().target;
+        assert!((amps - 1.8015).abs() < 1e-4, "{amps}");
     }
 }
