@@ -229,7 +229,7 @@ impl Encoder {
     /// use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
     /// let mut enc = Encoder::new(EncoderConfig::dji(GearRatio::M2006)).unwrap();
     /// enc.update(0).unwrap();
-    /// // 3 ms at 18 000 rotor rpm (two frames lost): 2.7 rotor turns = 22 118.4 counts.
+    /// // 9 ms at 18 000 rotor rpm (eight frames lost): 2.7 rotor turns = 22 118.4 counts.
     /// enc.update_predicted((22_118 % 8192) as u16, 22_118.4).unwrap();
     /// assert_eq!(enc.total_counts(), 22_118);
     /// ```

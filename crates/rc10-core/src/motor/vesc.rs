@@ -63,9 +63,17 @@ pub mod packet {
     pub const STATUS_5: u8 = 27;
 }
 
-/// Which status packets a VESC is set to broadcast (VESC Tool: App Settings → General →
-/// "CAN Status Message Mode"), each at [`VescConfig::status_hz`]. Every one is a frame on the
-/// bus, so the set counts in the frame budget and each is a listen ID of the node.
+/// Which status packets a VESC is set to broadcast, each at [`VescConfig::status_hz`]. Every
+/// one is a frame on the bus, so the set counts in the frame budget and each is a listen ID
+/// of the node.
+///
+/// Set the VESC to match in VESC Tool (App Settings → General). Firmware 6.x has two status
+/// rates, each with its own set of messages: set rate 1 (appconf `can_status_rate_1`) to
+/// [`VescConfig::status_hz`] and its messages (`can_status_msgs_r1`, a mask) to this set,
+/// bit for bit (STATUS_1 is bit 0 … STATUS_5 bit 4), and leave rate 2's messages empty. The
+/// firmware's default sends no status at all, which this driver sees as a motor that never
+/// comes online. Firmware 5.x: "CAN Status Message Mode" (`1`, `1_2`, … `1_2_3_4_5`) and one
+/// rate.
 ///
 /// ```
 /// use rc10_core::motor::vesc::VescStatusSet;
@@ -89,7 +97,7 @@ impl VescStatusSet {
     pub const STATUS_4: Self = Self(1 << 3);
     /// STATUS_5 (packet 27): tachometer, input voltage (read, not used).
     pub const STATUS_5: Self = Self(1 << 4);
-    /// STATUS 1 to 5, VESC Tool's "1_2_3_4_5".
+    /// STATUS 1 to 5 (firmware 6.x mask `0x1F`; 5.x mode "1_2_3_4_5").
     pub const ALL: Self = Self(0b1_1111);
 
     const PACKETS: [(Self, u8); 5] = [
@@ -177,7 +185,8 @@ pub struct VescConfig {
     /// Send a brake current (amps) instead of `SET_RPM 0` for a speed target that reaches the
     /// wire as eRPM 0 (below half an eRPM).
     pub zero_speed_brake_amps: Option<f32>,
-    /// Frames per second the VESC sends of each status packet (VESC Tool, "CAN status rate").
+    /// Frames per second the VESC sends of each status packet (firmware 6.x:
+    /// `can_status_rate_1`, up to 1000 Hz; the firmware's default is 50 Hz).
     pub status_hz: u32,
     /// Which status packets it sends (default STATUS_1 only; add STATUS_4 for temperatures
     /// and the angle).

@@ -34,7 +34,12 @@ pub enum Fault {
         /// Temperature, °C.
         celsius: f64,
     },
-    /// Each frame on the wire is lost with `probability` in `[from_ms, to_ms)`.
+    /// Each frame on the wire is lost with `probability` in `[from_ms, to_ms)`: it takes
+    /// its time on the bus and reaches nobody, and is not sent again. On a real bus a frame
+    /// spoiled by noise is answered with an error frame and retransmitted by the controller,
+    /// so this is what reaches the software when that fails too (a frame dropped in a busy
+    /// ESC or a saturated receive path): a stress on rc10's timeouts and counters, not a
+    /// model of the wire's error handling.
     FrameLoss {
         /// Probability per frame, 0–1.
         probability: f64,
@@ -70,7 +75,10 @@ pub enum Fault {
         /// End, ms.
         to_ms: u64,
     },
-    /// Each frame arrives with a wrong DLC with `probability` in `[from_ms, to_ms)`.
+    /// Each frame arrives with a wrong DLC with `probability` in `[from_ms, to_ms)`. The
+    /// wire's CRC would catch a corrupted DLC; this stands for a malformed frame that is
+    /// valid on the wire (a device's firmware fault, a foreign node on a reused ID), which
+    /// rc10 must reject and count rather than parse.
     Corruption {
         /// Probability per frame, 0–1.
         probability: f64,
