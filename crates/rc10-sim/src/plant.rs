@@ -111,6 +111,10 @@ impl MotorParams {
                 // L/R = 0.097 mH / 0.194 Ω = 0.5 ms.
                 tau_s: 0.5e-3,
                 // 482 rpm no-load with the C620, spinning freely: the line ends at 491.4.
+                // The published rated point, 3 N·m at 469 rpm, is not on any line of the
+                // published 72 rpm/(N·m) through the no-load speed (it needs ≤ 40): the line
+                // follows the gradient and the no-load speed, so above about 275 rpm the
+                // model has less than 3 N·m (conservative for a loaded chassis at speed).
                 zero_torque_rpm: zero_torque_rpm(482.0, 72.0, coulomb, viscous),
                 gradient_rpm_per_nm: 72.0,
             },
