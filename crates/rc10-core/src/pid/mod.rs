@@ -106,7 +106,8 @@ pub enum PidConfigError {
     InvalidLimit,
     /// The deadband is NaN, infinite or negative.
     InvalidDeadband,
-    /// The integral-separation threshold is NaN or negative (use `f32::INFINITY` to disable).
+    /// The integral-separation threshold is NaN, or not above the deadband (0 without one):
+    /// no error would ever be integrated. Use `f32::INFINITY` for no separation.
     InvalidSeparation,
     /// The derivative filter cutoff is NaN or negative (use `0.0` for no filter).
     InvalidFilter,
@@ -122,7 +123,9 @@ impl fmt::Display for PidConfigError {
             Self::GainNotFinite => "PID gain is NaN or infinite",
             Self::InvalidLimit => "PID limit is NaN or negative",
             Self::InvalidDeadband => "PID deadband is NaN, infinite or negative",
-            Self::InvalidSeparation => "PID integral-separation threshold is NaN or negative",
+            Self::InvalidSeparation => {
+                "PID integral-separation threshold is NaN or not above the deadband"
+            }
             Self::InvalidFilter => "PID derivative filter cutoff is NaN or negative",
             Self::InvalidPeriod => "PID circular period is not finite and positive",
             Self::InvalidTrackingRate => "tracking differentiator r is not finite and positive",

@@ -31,10 +31,15 @@ pub struct PidConfig {
     /// Integral separation: while `|error| > integral_separation` the integral is **frozen**
     /// (it neither grows nor decays, and it still contributes its held value to the output).
     /// RC10_LIB switched the whole I term off instead, which made the output jump at the
-    /// threshold. `f32::INFINITY` disables separation.
+    /// threshold. `f32::INFINITY` disables separation. It must be above the
+    /// [`deadband`](Self::deadband) (0 with no deadband): at or below it no error would ever
+    /// be integrated, and the I term would be off without a word (a C habit writes 0 for "no
+    /// separation"); [`validate`](Self::validate) refuses it.
     pub integral_separation: f32,
     /// Errors with `|error| ≤ deadband` count as zero for P and I (the I term holds, so a
-    /// holding current is kept); D still damps. Outside the band the full error is used.
+    /// holding current is kept; the step that enters the band still adds the trapezoid's
+    /// half of the previous error); D still damps. Outside the band the full error is used.
+    /// (RC10_LIB's band is `|error| < deadband`.)
     pub deadband: f32,
     /// Cutoff of a first-order low-pass on the D term in hertz; `0.0` for no filter. After a
     /// reset the filter starts from zero, so the first derivative sample is smoothed like
@@ -113,11 +118,12 @@ impl PidConfig {
         if let Err(e) = check_limit(self.integral_limit) {
             return Err(e);
         }
-        if self.integral_separation.is_nan() || self.integral_separation < 0.0 {
-            return Err(PidConfigError::InvalidSeparation);
-        }
         if let Err(e) = check_deadband(self.deadband) {
             return Err(e);
+        }
+        // Not `<=`: NaN fails this comparison and is refused with the rest.
+        if !(self.integral_separation > self.deadband) {
+            return Err(PidConfigError::InvalidSeparation);
         }
         if self.d_cutoff_hz.is_nan() || self.d_cutoff_hz < 0.0 {
             return Err(PidConfigError::InvalidFilter);

@@ -520,23 +520,43 @@ fn dji_angle_gains_set_while_running_drive_the_next_tick() {
 fn pid_configuration_rules_for_separation_and_the_d_filter() {
     let base = PidConfig::new(1.0, 1.0, 0.0);
     use rc10_core::pid::PidConfigError::{InvalidFilter, InvalidSeparation};
-    // Documented: a separation threshold or D cutoff that is NaN or negative is refused; 0 is
-    // allowed (separation 0: integrate only at zero error; cutoff 0: no filter).
+    // Documented: a separation threshold that is NaN or not above the deadband is refused
+    // (no error would ever be integrated: the I term off without a word, RC10_LIB's defect;
+    // a C habit writes 0 for "no separation"); a D cutoff that is NaN or negative is refused,
+    // 0 is no filter.
+    for separation in [-1.0, f32::NAN, 0.0] {
+        assert_eq!(
+            base.with_integral_separation(separation).validate(),
+            Err(InvalidSeparation)
+        );
+    }
+    assert_eq!(base.with_integral_separation(0.01).validate(), Ok(()));
+    let banded = base.with_deadband(5.0);
     assert_eq!(
-        base.with_integral_separation(-1.0).validate(),
+        banded.with_integral_separation(5.0).validate(),
         Err(InvalidSeparation)
     );
+    assert_eq!(banded.with_integral_separation(5.5).validate(), Ok(()));
     assert_eq!(
-        base.with_integral_separation(f32::NAN).validate(),
-        Err(InvalidSeparation)
+        banded.with_integral_separation(f32::INFINITY).validate(),
+        Ok(())
     );
-    assert_eq!(base.with_integral_separation(0.0).validate(), Ok(()));
     assert_eq!(base.with_d_cutoff_hz(-1.0).validate(), Err(InvalidFilter));
     assert_eq!(
         base.with_d_cutoff_hz(f32::NAN).validate(),
         Err(InvalidFilter)
     );
     assert_eq!(base.with_d_cutoff_hz(0.0).validate(), Ok(()));
+    // A band of 5 with separation 5.5: the error 5.2 is integrated, 6 is not.
+    let mut pid = rc10_core::pid::Pid::new(
+        PidConfig::new(0.0, 1.0, 0.0)
+            .with_deadband(5.0)
+            .with_integral_separation(5.5),
+    )
+    .unwrap();
+    pid.update(5.2, 0.0, 0.001); // first step: rectangle, 5.2 · 0.001
+    assert!((pid.update(6.0, 0.0, 0.001).i - 0.0052).abs() < 1e-7); // frozen at 6
+    assert!((pid.update(5.2, 0.0, 0.001).i - 0.0104).abs() < 1e-7); // re-entry: rectangle
 }
 
 #[test]

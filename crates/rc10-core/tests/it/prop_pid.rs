@@ -106,20 +106,24 @@ fn pid_config() -> impl Strategy<Value = PidConfig> {
     (
         (gain(), gain(), gain()),
         (limit(), limit()),
-        prop_oneof![2 => Just(f32::INFINITY), 1 => 0.0f32..1.0e3],
+        // Separation above the deadband (the rule), by this much.
+        prop_oneof![2 => Just(f32::INFINITY), 1 => 1.0e-2f32..1.0e3],
         prop_oneof![2 => Just(0.0f32), 1 => 0.0f32..100.0],
         prop_oneof![2 => Just(0.0f32), 1 => 0.1f32..500.0],
         error_mode(),
     )
-        .prop_map(|((kp, ki, kd), (out, int), sep, deadband, cutoff, mode)| {
-            PidConfig::new(kp, ki, kd)
-                .with_output_limit(out)
-                .with_integral_limit(int)
-                .with_integral_separation(sep)
-                .with_deadband(deadband)
-                .with_d_cutoff_hz(cutoff)
-                .with_error_mode(mode)
-        })
+        .prop_map(
+            |((kp, ki, kd), (out, int), above, deadband, cutoff, mode)| {
+                let sep = deadband + above;
+                PidConfig::new(kp, ki, kd)
+                    .with_output_limit(out)
+                    .with_integral_limit(int)
+                    .with_integral_separation(sep)
+                    .with_deadband(deadband)
+                    .with_d_cutoff_hz(cutoff)
+                    .with_error_mode(mode)
+            },
+        )
 }
 
 /// The limit in force passed to `update_within`: anything, NaN and negative included.
