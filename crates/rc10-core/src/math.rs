@@ -122,6 +122,13 @@ fn wrap_positive_valid_period(value: f32, period: f32) -> f32 {
 #[inline]
 pub(crate) fn wrap_signed_valid_period(value: f32, period: f32) -> f32 {
     let half = period * 0.5;
+    // Already in range: the value itself, exactly (`+ 0.0` turns −0 into +0). Shifted by
+    // half a period and back it would come out rounded to the spacing of floats near the
+    // half period (1.5e-5° near 180°: an error of 1e-6° would read 0), and a value just
+    // below the half period could round up to it and come out as −half.
+    if value >= -half && value < half {
+        return value + 0.0;
+    }
     let shifted = value + half;
     if !shifted.is_finite() {
         return 0.0 - half;
@@ -180,7 +187,8 @@ pub(crate) fn rounding_samples(seed: u32, span: u32) -> impl Iterator<Item = f32
     })
 }
 
-/// Wraps `value` into `[-period/2, period/2)`: the signed shortest offset on a circle.
+/// Wraps `value` into `[-period/2, period/2)`: the signed shortest offset on a circle. A
+/// value already in that range comes back exactly (`−0.0` as `+0.0`).
 ///
 /// Returns `0.0` for a non-finite `value` or a non-finite or non-positive `period`.
 ///
@@ -230,13 +238,17 @@ pub fn angle_diff_deg(from_deg: f32, to_deg: f32) -> f32 {
     wrap_deg_180(to_deg - from_deg)
 }
 
-/// Moves `current` towards `target` by at most `max_step` (RC10_LIB `ramp`).
+/// Moves `current` towards `target` by at most `max_step`.
+///
+/// RC10_LIB's `ramp(target, current, rate, dt)` takes the target first and a rate per
+/// second: porting a call as it stands compiles (all `f32`) and ramps the wrong value. Here
+/// the value that moves comes first and the limit is a step per call (`rate · dt`);
+/// [`crate::filter::Ramp`] keeps the value and takes a rate in units per second.
 ///
 /// `max_step` is taken by magnitude. Within one step of `target` the result is `target`
 /// exactly (never a rounding short of or past it). A NaN `target` leaves `current`
 /// unchanged; a NaN or infinite `current` jumps to `target` (there is nothing to ramp from:
-/// an infinite one would stay infinite, as `∞ − step = ∞`). See [`crate::filter::Ramp`]
-/// for a stateful limiter with a rate in units per second.
+/// an infinite one would stay infinite, as `∞ − step = ∞`).
 ///
 /// ```
 /// use rc10_core::math::ramp;
@@ -357,6 +369,23 @@ mod tests {
         // -0° is 0°, not a negative zero (which telemetry would print as "-0.00").
         assert!(wrap_deg_360(-0.0).is_sign_positive());
         assert!(wrap_positive(-720.0, 360.0).is_sign_positive());
+    }
+
+    #[test]
+    fn wrap_signed_returns_values_in_range_exactly() {
+        // Shifted by 180° and back, 1e-6° came out 0 (floats near 180 are 1.5e-5 apart).
+        assert_eq!(wrap_deg_180(1e-6), 1e-6);
+        assert_eq!(wrap_deg_180(-1e-6), -1e-6);
+        assert_eq!(wrap_rad_pi(1e-9), 1e-9);
+        // Just below 180: itself, not rounded up to 180 and wrapped to −180.
+        let below = 180.0f32.next_down();
+        assert_eq!(wrap_deg_180(below), below);
+        assert_eq!(wrap_deg_180(-180.0), -180.0);
+        assert_eq!(wrap_deg_180(180.0), -180.0);
+        assert!(wrap_deg_180(-0.0).is_sign_positive());
+        // Out of range, exact where the arithmetic is: 190 − 360, −190 + 360.
+        assert_eq!(wrap_deg_180(190.0), -170.0);
+        assert_eq!(wrap_deg_180(-190.0), 170.0);
     }
 
     #[test]
