@@ -287,7 +287,10 @@ impl Encoder {
         self.total_counts
     }
 
-    /// Rotor angle within one rotor turn in degrees, [0, 360).
+    /// Rotor angle within one rotor turn in degrees, [0, 360), measured from the origin
+    /// (`total_counts` modulo a turn): for a power-on origin 0 at the first reading, whatever
+    /// the raw count; moved by [`set_total_angle_deg`](Self::set_total_angle_deg). Not the
+    /// encoder's raw angle.
     pub fn rotor_angle_deg(&self) -> f32 {
         let n = i64::from(self.config.counts_per_rev);
         self.total_counts.rem_euclid(n) as f32 * (360.0 / n as f32)

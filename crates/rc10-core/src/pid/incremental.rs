@@ -14,7 +14,10 @@ use crate::math::{finite, saturate};
 /// ```
 /// use rc10_core::pid::IncrementalPidConfig;
 /// // RC10_LIB's M3508 speed-loop demo gains, converted: kp 18 mA/rpm, ki 0.015 mA/rpm per
-/// // 1 ms tick = 15 mA/(rpm·s), 5 rpm deadband, 15 A limit, TD off. Output in mA.
+/// // 1 ms tick = 15 mA/(rpm·s), 5 rpm deadband, 15 A limit, TD off. Output in mA. The
+/// // gains carry over; the band does not behave the same: RC10_LIB takes an error inside it
+/// // as 0, which steps its output back by kp·e₁ on entering, and its band is `|e| < 5`;
+/// // here the output holds and the band is `|e| ≤ 5`.
 /// let rc10_demo = IncrementalPidConfig::new(18.0, 15.0, 0.0)
 ///     .with_deadband(5.0)
 ///     .with_output_limit(15_000.0);

@@ -11,6 +11,11 @@ const MAX_SUBSTEPS: u32 = 8;
 /// and `x2` its rate. `r` (rad/s) sets the speed: a step is 90 % tracked after about `3.9 / r`
 /// seconds, with no overshoot.
 ///
+/// This is the linear tracker of RC10_LIB's `calc_track_D`, not Han Jingqing's nonlinear TD
+/// with `fhan(x1 − v, x2, r, h0)`: there `r` bounds the tracked signal's acceleration (units
+/// per s²) and `h0` is a filter factor; here `r` is a bandwidth in rad/s, and the time a
+/// step takes does not depend on its size. Gains tuned for an `fhan` TD do not carry over.
+///
 /// Integrated by explicit Euler. Explicit Euler of this system is stable only for
 /// `r·dt < 2` and overshoots for `r·dt > 1`, so a call whose `dt` exceeds `1/r` is split into
 /// sub-steps of at most `1/r` (a step of exactly `1/r` is dead-beat). After a pause longer than
