@@ -566,17 +566,11 @@ impl TwistLimiter {
 /// axis at 0 (a limit computed from bad numbers stops the axis rather than freeing it;
 /// [`TwistLimiter`] reads a NaN limit as 0 too). A NaN command on an axis is 0.
 pub fn clamp_twist(twist: Twist, max: Twist) -> Twist {
-    let clamp = |value: f32, limit: f32| {
-        if limit.is_nan() {
-            0.0
-        } else {
-            saturate(value, limit)
-        }
-    };
+    // `saturate` holds a value at 0 under a NaN limit.
     Twist::new(
-        clamp(twist.vx_m_s, max.vx_m_s),
-        clamp(twist.vy_m_s, max.vy_m_s),
-        clamp(twist.omega_rad_s, max.omega_rad_s),
+        saturate(twist.vx_m_s, max.vx_m_s),
+        saturate(twist.vy_m_s, max.vy_m_s),
+        saturate(twist.omega_rad_s, max.omega_rad_s),
     )
 }
 

@@ -38,19 +38,24 @@ pub fn constrain(value: f32, min: f32, max: f32) -> f32 {
 
 /// Clamps `value` into `[-limit, limit]` and always returns a finite number.
 ///
-/// `limit` is taken by magnitude; a NaN or infinite limit means "no limit" (the result is still
-/// kept within `±f32::MAX`). A NaN `value` returns `0.0`.
+/// `limit` is taken by magnitude; an infinite limit means "no limit" (the result is still
+/// kept within `±f32::MAX`), and a NaN limit holds the value at 0: a limit computed from bad
+/// numbers (a derating, a power budget) stops the output rather than freeing it, as the PID's
+/// limit in force and [`crate::chassis::clamp_twist`] read one. A NaN `value` returns `0.0`.
 ///
 /// ```
 /// use rc10_core::math::saturate;
 /// assert_eq!(saturate(-30.0, 20.0), -20.0);
 /// assert_eq!(saturate(f32::INFINITY, f32::INFINITY), f32::MAX);
 /// assert_eq!(saturate(f32::NAN, 1.0), 0.0);
+/// assert_eq!(saturate(15.0, f32::NAN), 0.0);
 /// ```
 #[inline]
 pub fn saturate(value: f32, limit: f32) -> f32 {
     let lim = if limit.is_finite() {
         limit.abs()
+    } else if limit.is_nan() {
+        0.0
     } else {
         f32::MAX
     };
@@ -369,6 +374,15 @@ mod tests {
         // -0° is 0°, not a negative zero (which telemetry would print as "-0.00").
         assert!(wrap_deg_360(-0.0).is_sign_positive());
         assert!(wrap_positive(-720.0, 360.0).is_sign_positive());
+    }
+
+    #[test]
+    fn saturate_holds_the_value_at_zero_under_a_nan_limit() {
+        assert_eq!(saturate(15.0, f32::NAN), 0.0);
+        assert_eq!(saturate(-15.0, f32::NAN), 0.0);
+        // An infinite limit is no limit; a negative one is taken by magnitude.
+        assert_eq!(saturate(15.0, f32::INFINITY), 15.0);
+        assert_eq!(saturate(15.0, -10.0), 10.0);
     }
 
     #[test]
