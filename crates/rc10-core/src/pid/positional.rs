@@ -121,8 +121,7 @@ impl PidConfig {
         if let Err(e) = check_deadband(self.deadband) {
             return Err(e);
         }
-        // Not `<=`: NaN fails this comparison and is refused with the rest.
-        if !(self.integral_separation > self.deadband) {
+        if self.integral_separation.is_nan() || self.integral_separation <= self.deadband {
             return Err(PidConfigError::InvalidSeparation);
         }
         if self.d_cutoff_hz.is_nan() || self.d_cutoff_hz < 0.0 {
