@@ -1,6 +1,8 @@
 //! Chassis kinematics: robot twist ↔ wheel speeds for mecanum, omni and swerve drives, world ↔
 //! robot frames, acceleration limiting that keeps the direction of motion, wheel-speed
-//! saturation that scales all wheels together, and odometry (forward kinematics).
+//! saturation that scales all wheels together, forward kinematics (the twist the wheels
+//! measure) and dead-reckoning odometry ([`Odometry`]: a world pose from that twist, with the
+//! heading from the wheels or a gyro).
 //!
 //! Conventions: robot frame x forward, y left, z up; angles counter-clockwise positive, in
 //! radians; speeds in m/s and rad/s; wheel speeds are **output-shaft rpm** of each wheel's
@@ -19,6 +21,7 @@
 //! assert!((back.vx_m_s - 1.0).abs() < 1e-5);
 //! ```
 
+use crate::geometry::Pose2D;
 use crate::math::{saturate, wrap_rad_pi};
 use core::f32::consts::{PI, TAU};
 use core::fmt;
@@ -574,11 +577,224 @@ pub fn clamp_twist(twist: Twist, max: Twist) -> Twist {
     )
 }
 
+/// Dead reckoning: integrates the robot-frame twist the wheels measure
+/// ([`LinearChassis::twist`], [`Swerve::twist`]) into a world pose: `x`, `y` in metres,
+/// heading in radians (counter-clockwise from world +x, kept in `[−π, π)`).
+///
+/// Each step takes the twist as constant over `dt_s`, so the robot moves along an arc: the
+/// step is exact for a constant twist however long it is (a straight line when it does not
+/// turn). The heading comes from the twist's `omega_rad_s` ([`update`](Self::update)), or
+/// from a gyro ([`update_with_yaw`](Self::update_with_yaw), usually better: wheels slip when
+/// the chassis spins). Wheel odometry drifts; correct it with an absolute fix through
+/// [`reset`](Self::reset).
+///
+/// ```
+/// use rc10_core::chassis::{Odometry, Twist};
+/// use rc10_core::geometry::Pose2D;
+/// let mut odom = Odometry::new(Pose2D::new(0.0, 0.0, 0.0));
+/// // 1 m/s forward while turning left at 1 rad/s, for a quarter turn: a quarter of a circle
+/// // of radius 1 m, ending at (1, 1) facing +y.
+/// let quarter_s = core::f32::consts::FRAC_PI_2;
+/// assert!(odom.update(Twist::new(1.0, 0.0, 1.0), quarter_s));
+/// let p = odom.pose();
+/// assert!((p.x - 1.0).abs() < 1e-5 && (p.y - 1.0).abs() < 1e-5);
+/// assert!((p.theta_rad - quarter_s).abs() < 1e-6);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Odometry {
+    pose: Pose2D,
+    /// The gyro's yaw at the last [`update_with_yaw`](Self::update_with_yaw), rad.
+    last_yaw: Option<f32>,
+}
+
+impl Odometry {
+    /// Starts at `start` (its heading wrapped into `[−π, π)`; a non-finite pose starts at the
+    /// origin).
+    pub fn new(start: Pose2D) -> Self {
+        let mut odometry = Self::default();
+        odometry.reset(start);
+        odometry
+    }
+
+    /// The pose now.
+    pub const fn pose(&self) -> Pose2D {
+        self.pose
+    }
+
+    /// Sets the pose (an absolute fix: a wall, a marker, the referee system's position).
+    /// Returns `false`, and changes nothing, for a non-finite pose.
+    pub fn reset(&mut self, pose: Pose2D) -> bool {
+        if !(pose.x.is_finite() && pose.y.is_finite() && pose.theta_rad.is_finite()) {
+            return false;
+        }
+        self.pose = Pose2D::new(pose.x, pose.y, wrap_rad_pi(pose.theta_rad));
+        true
+    }
+
+    /// Advances `dt_s` seconds with the robot-frame `twist`, turning by
+    /// `omega_rad_s · dt_s`. Returns `false`, and changes nothing, for a non-finite twist or
+    /// a `dt_s` that is not finite and positive.
+    pub fn update(&mut self, twist: Twist, dt_s: f32) -> bool {
+        if !(twist.is_finite() && dt_s.is_finite() && dt_s > 0.0) {
+            return false;
+        }
+        self.advance(twist, twist.omega_rad_s * dt_s, dt_s)
+    }
+
+    /// Advances `dt_s` seconds with the robot-frame `twist` (its `omega_rad_s` unused), to
+    /// the heading `yaw_rad` a gyro reads at the end of the step (any convention: only its
+    /// change counts, the shorter way round, and the pose's heading follows the gyro's
+    /// changes from the heading the pose had; the first call has no change to go by and moves
+    /// without turning). Returns `false`, and changes nothing, for a non-finite twist or yaw
+    /// or a `dt_s` that is not finite and positive.
+    pub fn update_with_yaw(&mut self, twist: Twist, yaw_rad: f32, dt_s: f32) -> bool {
+        if !(twist.is_finite() && yaw_rad.is_finite() && dt_s.is_finite() && dt_s > 0.0) {
+            return false;
+        }
+        let turn = match self.last_yaw {
+            Some(last) => wrap_rad_pi(yaw_rad - last),
+            None => 0.0,
+        };
+        let moved = self.advance(twist, turn, dt_s);
+        if moved {
+            self.last_yaw = Some(yaw_rad);
+        }
+        moved
+    }
+
+    /// Moves along the arc that turns by `turn_rad` while covering the robot-frame velocity
+    /// for `dt_s`: the displacement is `∫ R(θ₀ + turn·t/dt) v dt`, which is
+    /// `R(θ₀) · dt · [[s, −c], [c, s]] · v` with `s = sin φ / φ` and `c = (1 − cos φ) / φ`.
+    fn advance(&mut self, twist: Twist, turn_rad: f32, dt_s: f32) -> bool {
+        let phi = turn_rad;
+        let (s, c) = if phi.abs() < 1e-3 {
+            // The series to the first term left out: errors below 1e-13 relative.
+            (1.0 - phi * phi / 6.0, phi * 0.5)
+        } else {
+            let (sin, cos) = libm::sincosf(phi);
+            (sin / phi, (1.0 - cos) / phi)
+        };
+        let (vx, vy) = (twist.vx_m_s * dt_s, twist.vy_m_s * dt_s);
+        let (local_x, local_y) = (s * vx - c * vy, c * vx + s * vy);
+        let (sin0, cos0) = libm::sincosf(self.pose.theta_rad);
+        let x = self.pose.x + cos0 * local_x - sin0 * local_y;
+        let y = self.pose.y + sin0 * local_x + cos0 * local_y;
+        let theta = wrap_rad_pi(self.pose.theta_rad + phi);
+        if !(x.is_finite() && y.is_finite()) {
+            return false;
+        }
+        self.pose = Pose2D::new(x, y, theta);
+        true
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use core::f32::consts::{FRAC_PI_2, FRAC_PI_4};
     use proptest::prelude::*;
+
+    fn close(p: Pose2D, x: f32, y: f32, theta: f32, tol: f32) -> bool {
+        (p.x - x).abs() < tol
+            && (p.y - y).abs() < tol
+            && wrap_rad_pi(p.theta_rad - theta).abs() < tol
+    }
+
+    #[test]
+    fn odometry_drives_straight_along_its_heading() {
+        // 1 m/s forward for 1 s in 1 ms steps, facing +y (90°): 1 m along +y.
+        let mut odom = Odometry::new(Pose2D::new(2.0, 3.0, FRAC_PI_2));
+        for _ in 0..1000 {
+            assert!(odom.update(Twist::new(1.0, 0.0, 0.0), 0.001));
+        }
+        assert!(
+            close(odom.pose(), 2.0, 4.0, FRAC_PI_2, 1e-4),
+            "{:?}",
+            odom.pose()
+        );
+        // Strafing left (+y in the robot frame) while facing +y goes towards world −x.
+        for _ in 0..500 {
+            odom.update(Twist::new(0.0, 1.0, 0.0), 0.001);
+        }
+        assert!(
+            close(odom.pose(), 1.5, 4.0, FRAC_PI_2, 1e-4),
+            "{:?}",
+            odom.pose()
+        );
+    }
+
+    #[test]
+    fn odometry_follows_a_circle_exactly_in_one_step_or_many() {
+        // v = 1 m/s, ω = 1 rad/s: a circle of radius 1 m about (0, 1). Half a turn (π s)
+        // ends at (0, 2) facing −x; a whole turn back at the start.
+        let arc = Twist::new(1.0, 0.0, 1.0);
+        let mut fine = Odometry::default();
+        for _ in 0..3142 {
+            fine.update(arc, PI / 3142.0);
+        }
+        assert!(close(fine.pose(), 0.0, 2.0, PI, 1e-3), "{:?}", fine.pose());
+        let mut coarse = Odometry::default();
+        assert!(coarse.update(arc, PI));
+        assert!(
+            close(coarse.pose(), 0.0, 2.0, PI, 1e-5),
+            "{:?}",
+            coarse.pose()
+        );
+        // A quarter turn in one step: (1, 1), where the midpoint rule would say (1.11, 1.11).
+        let mut quarter = Odometry::default();
+        quarter.update(arc, FRAC_PI_2);
+        assert!(
+            close(quarter.pose(), 1.0, 1.0, FRAC_PI_2, 1e-5),
+            "{:?}",
+            quarter.pose()
+        );
+        // Strafing right at 1 m/s while turning left at 1 rad/s: the world velocity is
+        // (sin t, −cos t), so after π s the robot is at (2, 0), facing −x.
+        let mut side = Odometry::default();
+        side.update(Twist::new(0.0, -1.0, 1.0), PI);
+        assert!(close(side.pose(), 2.0, 0.0, PI, 1e-5), "{:?}", side.pose());
+    }
+
+    #[test]
+    fn odometry_with_a_gyro_turns_by_the_gyros_change_the_short_way() {
+        // The gyro reads in its own frame (offset 1 rad) and wraps at ±π: only its change,
+        // the shorter way round, turns the pose. A quarter circle of radius 1 in 1000 steps.
+        let mut odom = Odometry::default();
+        let n = 1000;
+        let dt = FRAC_PI_2 / n as f32;
+        assert!(odom.update_with_yaw(Twist::new(1.0, 0.0, 0.0), 3.0, dt)); // first: no turn
+        let mut fresh = Odometry::default();
+        fresh.update(Twist::new(1.0, 0.0, 0.0), dt);
+        assert_eq!(odom.pose(), fresh.pose());
+        for k in 1..=n {
+            let yaw = wrap_rad_pi(3.0 + FRAC_PI_2 * k as f32 / n as f32); // crosses +π
+            // The twist's ω (wrong on purpose) is ignored: the gyro turns the pose.
+            assert!(odom.update_with_yaw(Twist::new(1.0, 0.0, -5.0), yaw, dt));
+        }
+        assert!(
+            close(odom.pose(), 1.0 + dt, 1.0, FRAC_PI_2, 2e-3),
+            "{:?}",
+            odom.pose()
+        );
+    }
+
+    #[test]
+    fn odometry_refuses_bad_input_and_changes_nothing() {
+        let mut odom = Odometry::new(Pose2D::new(1.0, 2.0, 7.0)); // heading wrapped
+        assert!((odom.pose().theta_rad - (7.0 - TAU)).abs() < 1e-6);
+        let before = odom.pose();
+        assert!(!odom.update(Twist::new(f32::NAN, 0.0, 0.0), 0.001));
+        assert!(!odom.update(Twist::new(1.0, 0.0, f32::INFINITY), 0.001));
+        assert!(!odom.update(Twist::new(1.0, 0.0, 0.0), 0.0));
+        assert!(!odom.update(Twist::new(1.0, 0.0, 0.0), f32::NAN));
+        assert!(!odom.update_with_yaw(Twist::new(1.0, 0.0, 0.0), f32::NAN, 0.001));
+        assert!(!odom.update(Twist::new(f32::MAX, 0.0, 0.0), f32::MAX)); // off the map
+        assert!(!odom.reset(Pose2D::new(f32::NAN, 0.0, 0.0)));
+        assert_eq!(odom.pose(), before);
+        assert!(odom.reset(Pose2D::new(0.0, 0.0, 0.0)));
+        assert_eq!(odom.pose(), Pose2D::default());
+    }
 
     fn rm_chassis() -> LinearChassis<4> {
         LinearChassis::mecanum(MecanumConfig::new(0.4, 0.36, 0.076)).unwrap()
