@@ -111,10 +111,11 @@ impl MotorParams {
                 // L/R = 0.097 mH / 0.194 Ω = 0.5 ms.
                 tau_s: 0.5e-3,
                 // 482 rpm no-load with the C620, spinning freely: the line ends at 491.4.
-                // The published rated point, 3 N·m at 469 rpm, is not on any line of the
-                // published 72 rpm/(N·m) through the no-load speed (it needs ≤ 40): the line
-                // follows the gradient and the no-load speed, so above about 275 rpm the
-                // model has less than 3 N·m (conservative for a loaded chassis at speed).
+                // The published rated point, 3 N·m at 469 rpm, is not on the line of the
+                // published 72 rpm/(N·m) through the no-load speed (through 482 rpm it would
+                // need 4.3 rpm/(N·m)): the line follows the gradient and the no-load speed,
+                // so above about 275 rpm the model has less than 3 N·m, and at 469 rpm only
+                // 0.31 N·m (a loaded chassis at speed is slower here than on a real one).
                 zero_torque_rpm: zero_torque_rpm(482.0, 72.0, coulomb, viscous),
                 gradient_rpm_per_nm: 72.0,
             },
@@ -550,8 +551,14 @@ impl DjiEsc {
             let omega = self.omega;
             let viscous = p.viscous_nm_s_per_rad * omega;
             let moving = omega.abs() > 1e-6;
-            // The motor's own Coulomb friction and the load's.
-            let friction = p.coulomb_nm + self.load.friction_nm;
+            // The motor's own Coulomb friction and the load's (a NaN or negative load
+            // friction counts as none: `clamp` below needs a non-negative bound).
+            let load_friction = if self.load.friction_nm > 0.0 {
+                self.load.friction_nm
+            } else {
+                0.0
+            };
+            let friction = p.coulomb_nm + load_friction;
             let coulomb = if moving {
                 friction * omega.signum()
             } else {
@@ -924,9 +931,28 @@ mod tests {
         let backward = coast(wheel, -10.0, 0.1);
         assert!((forward - 9.6633).abs() < 2e-3, "{forward}");
         assert!((backward + 9.6633).abs() < 2e-3, "{backward}");
-        // It stops after J/b·ln(50/40) = 3.3 s and stays stopped; at rest it stays at rest.
+        // It stops after J/b·ln(50/40) = 3.3 s and stays stopped.
         assert_eq!(coast(wheel, 10.0, 4.0), 0.0);
-        assert_eq!(coast(wheel, 0.0, 1.0), 0.0);
+        // Static friction holds against a torque below the whole friction: 0.06 N·m of
+        // gravity against 0.03 + 0.05 holds the shaft (the motor's 0.03 alone would not).
+        let held = Load {
+            torque_nm: 0.06,
+            ..wheel
+        };
+        assert_eq!(coast(held, 0.0, 1.0), 0.0);
+        // A negative or NaN load friction counts as none (and does not panic).
+        for bad in [-0.05, f64::NAN] {
+            let w = coast(
+                Load {
+                    friction_nm: bad,
+                    torque_nm: 0.05,
+                    ..wheel
+                },
+                0.0,
+                1.0,
+            );
+            assert!(w < -0.6 && w > -0.7, "{w}");
+        }
         // A constant torque of the same size (gravity, not friction) beats the motor's own
         // 0.03 N·m and turns the unpowered shaft backwards: (−0.05 + 0.03)/J ≈ −0.68 rad/s².
         let pulled = Load {
