@@ -633,21 +633,29 @@ impl Odometry {
     }
 
     /// Advances `dt_s` seconds with the robot-frame `twist`, turning by
-    /// `omega_rad_s · dt_s`. Returns `false`, and changes nothing, for a non-finite twist or
-    /// a `dt_s` that is not finite and positive.
+    /// `omega_rad_s · dt_s`. Returns `false`, and changes nothing, for a non-finite twist,
+    /// a `dt_s` that is not finite and positive, or a step that overflows. The next
+    /// [`update_with_yaw`](Self::update_with_yaw) starts afresh (it would otherwise turn
+    /// again by the gyro's change over this step).
     pub fn update(&mut self, twist: Twist, dt_s: f32) -> bool {
         if !(twist.is_finite() && dt_s.is_finite() && dt_s > 0.0) {
             return false;
         }
-        self.advance(twist, twist.omega_rad_s * dt_s, dt_s)
+        let moved = self.advance(twist, twist.omega_rad_s * dt_s, dt_s);
+        if moved {
+            self.last_yaw = None;
+        }
+        moved
     }
 
     /// Advances `dt_s` seconds with the robot-frame `twist` (its `omega_rad_s` unused), to
     /// the heading `yaw_rad` a gyro reads at the end of the step (any convention: only its
     /// change counts, the shorter way round, and the pose's heading follows the gyro's
     /// changes from the heading the pose had; the first call has no change to go by and moves
-    /// without turning). Returns `false`, and changes nothing, for a non-finite twist or yaw
-    /// or a `dt_s` that is not finite and positive.
+    /// without turning). Call it often enough that the gyro turns less than half a turn
+    /// between calls: a change of π or more is taken the other way round. Returns `false`,
+    /// and changes nothing, for a non-finite twist or yaw, a `dt_s` that is not finite and
+    /// positive, or a step that overflows.
     pub fn update_with_yaw(&mut self, twist: Twist, yaw_rad: f32, dt_s: f32) -> bool {
         if !(twist.is_finite() && yaw_rad.is_finite() && dt_s.is_finite() && dt_s > 0.0) {
             return false;
@@ -668,12 +676,14 @@ impl Odometry {
     /// `R(θ₀) · dt · [[s, −c], [c, s]] · v` with `s = sin φ / φ` and `c = (1 − cos φ) / φ`.
     fn advance(&mut self, twist: Twist, turn_rad: f32, dt_s: f32) -> bool {
         let phi = turn_rad;
-        let (s, c) = if phi.abs() < 1e-3 {
-            // The series to the first term left out: errors below 1e-13 relative.
-            (1.0 - phi * phi / 6.0, phi * 0.5)
+        // From the half angle: sin φ = 2·sin(φ/2)·cos(φ/2) and 1 − cos φ = 2·sin²(φ/2), so
+        // neither loses digits to a cancellation however small φ is (1 − cos φ would).
+        let (s, c) = if phi == 0.0 {
+            (1.0, 0.0)
         } else {
-            let (sin, cos) = libm::sincosf(phi);
-            (sin / phi, (1.0 - cos) / phi)
+            let (sin_half, cos_half) = libm::sincosf(phi * 0.5);
+            let twice_sin_half = 2.0 * sin_half / phi;
+            (twice_sin_half * cos_half, twice_sin_half * sin_half)
         };
         let (vx, vy) = (twist.vx_m_s * dt_s, twist.vy_m_s * dt_s);
         let (local_x, local_y) = (s * vx - c * vy, c * vx + s * vy);
@@ -780,6 +790,28 @@ mod tests {
     }
 
     #[test]
+    fn odometry_is_exact_for_small_turns_and_does_not_count_a_turn_twice() {
+        // One step turning by 2e-3 rad at 1 m/s for 1 s: a chord of the circle of radius
+        // 500 m, x = 500·sin(0.002), y = 500·(1 − cos(0.002)) = 0.999999333, 0.000999999667.
+        let mut odom = Odometry::default();
+        odom.update(Twist::new(1.0, 0.0, 2e-3), 1.0);
+        let p = odom.pose();
+        assert!((p.x - 0.999_999_3).abs() < 1e-6, "{p:?}");
+        assert!((p.y - 0.000_999_999_8).abs() < 1e-9, "{p:?}");
+        // A gyro step, then a step on the wheels' ω, then the gyro again: the gyro's change
+        // across the wheel step is not applied a second time.
+        let mut mixed = Odometry::default();
+        mixed.update_with_yaw(Twist::new(0.0, 0.0, 0.0), 0.0, 0.001);
+        mixed.update(Twist::new(0.0, 0.0, 1.0), 0.5); // turns 0.5 rad
+        mixed.update_with_yaw(Twist::new(0.0, 0.0, 0.0), 0.5, 0.001); // starts afresh
+        assert!(
+            (mixed.pose().theta_rad - 0.5).abs() < 1e-6,
+            "{:?}",
+            mixed.pose()
+        );
+    }
+
+    #[test]
     fn odometry_refuses_bad_input_and_changes_nothing() {
         let mut odom = Odometry::new(Pose2D::new(1.0, 2.0, 7.0)); // heading wrapped
         assert!((odom.pose().theta_rad - (7.0 - TAU)).abs() < 1e-6);
@@ -789,6 +821,8 @@ mod tests {
         assert!(!odom.update(Twist::new(1.0, 0.0, 0.0), 0.0));
         assert!(!odom.update(Twist::new(1.0, 0.0, 0.0), f32::NAN));
         assert!(!odom.update_with_yaw(Twist::new(1.0, 0.0, 0.0), f32::NAN, 0.001));
+        assert!(!odom.update_with_yaw(Twist::new(1.0, 0.0, 0.0), 0.5, 0.0));
+        assert!(!odom.update_with_yaw(Twist::new(f32::NAN, 0.0, 0.0), 0.5, 0.001));
         assert!(!odom.update(Twist::new(f32::MAX, 0.0, 0.0), f32::MAX)); // off the map
         assert!(!odom.reset(Pose2D::new(f32::NAN, 0.0, 0.0)));
         assert_eq!(odom.pose(), before);
