@@ -306,12 +306,22 @@ impl StepFactors {
 }
 
 impl DjiEsc {
-    /// An ESC with id `esc_id` at rest, sending feedback `feedback_phase_us` into every ms.
+    /// An ESC with id `esc_id` at rest, sending feedback `feedback_phase_us` into every ms. A
+    /// NaN or negative load friction counts as none (the static hold needs a non-negative
+    /// bound).
     pub fn new(params: MotorParams, esc_id: u8, load: Load, feedback_phase_us: u64) -> Self {
+        let friction_nm = if load.friction_nm > 0.0 {
+            load.friction_nm
+        } else {
+            0.0
+        };
         Self {
             params,
             esc_id,
-            load,
+            load: Load {
+                friction_nm,
+                ..load
+            },
             omega: 0.0,
             rotor_angle: 0.0,
             current: 0.0,
@@ -551,14 +561,8 @@ impl DjiEsc {
             let omega = self.omega;
             let viscous = p.viscous_nm_s_per_rad * omega;
             let moving = omega.abs() > 1e-6;
-            // The motor's own Coulomb friction and the load's (a NaN or negative load
-            // friction counts as none: `clamp` below needs a non-negative bound).
-            let load_friction = if self.load.friction_nm > 0.0 {
-                self.load.friction_nm
-            } else {
-                0.0
-            };
-            let friction = p.coulomb_nm + load_friction;
+            // The motor's own Coulomb friction and the load's (made non-negative in `new`).
+            let friction = p.coulomb_nm + self.load.friction_nm;
             let coulomb = if moving {
                 friction * omega.signum()
             } else {
