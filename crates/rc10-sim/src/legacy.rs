@@ -1,23 +1,44 @@
-//! RC10_LIB's own M3508 speed loop, for comparison runs: incremental PID with the library's
-//! demo gains (kp 18, ki 0.015 per 1 ms tick, deadband 5 rpm, limit 15 A, TD off; currents in
-//! mA), computing a current that rc10's DJI driver then sends in current mode.
+//! RC10_LIB's own M3508 speed loop, for comparison runs: its incremental PID with the demo
+//! gains it shipped them with (kp 18, ki 0.015 per call, kd 0, deadband 5 rpm, limit 15 A, TD
+//! off; currents in mA), computing a current that rc10's DJI driver then sends in current mode.
+//!
+//! The step follows `PID_Incremental::pid_calc` in RC10_LIB's `APP/Src/APP_PID.cpp` as of the
+//! commit that introduced these gains (`User/debug/Src/frame_demo.cpp`), which later versions
+//! keep; see [`LegacyPid`] for what that means for the loop.
 
 use rc10_core::can::CanFrame;
 use rc10_core::encoder::GearRatio;
 use rc10_core::motor::dji::DjiMotor;
 use rc10_core::motor::{ControlMode, Motor, MotorState, TargetError};
 use rc10_core::node::{BusUsage, CanNode, FrameError, TxBatch};
-use rc10_core::pid::IncrementalPidConfig;
 use rc10_core::time::Instant;
 use std::sync::Mutex;
 
-/// RC10_LIB's demo gains: output in mA, ki per second = 0.015 per tick × 1000 ticks/s.
-pub const RC10_DEMO_SPEED_PID: IncrementalPidConfig = IncrementalPidConfig::new(18.0, 15.0, 0.0)
-    .with_deadband(5.0)
-    .with_output_limit(15_000.0);
+/// RC10_LIB's demo speed-loop gains (`m3508_speed_pid_params`), in its units: rpm in, mA out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LegacyGains {
+    /// Proportional gain on the change of the error, mA per rpm.
+    pub kp: f32,
+    /// Integral gain, mA per rpm per call: RC10_LIB adds `ki · e` on every call, with no `dt`.
+    pub ki_per_call: f32,
+    /// Derivative gain on the error's second difference, mA per rpm (no `dt` either).
+    pub kd: f32,
+    /// An error of magnitude below this (rpm) is taken as 0.
+    pub deadband_rpm: f32,
+    /// Output limit, mA.
+    pub output_limit_ma: f32,
+}
 
-/// The `dt` RC10_LIB's PID hard-codes (`0.001f`): its `update()` is trusted to run at 1 kHz.
-const LEGACY_DT_S: f32 = 0.001;
+/// The gains RC10_LIB's demo gives its M3508 speed loop (its tracking differentiator off).
+/// Its `I_Outlimit` of 8000 mA, which later versions apply to the per-call I increment, is
+/// left out: the increment is `0.015 · e`, and it would take an error of 533 000 rpm to reach it.
+pub const RC10_DEMO_SPEED_GAINS: LegacyGains = LegacyGains {
+    kp: 18.0,
+    ki_per_call: 0.015,
+    kd: 0.0,
+    deadband_rpm: 5.0,
+    output_limit_ma: 15_000.0,
+};
 
 /// An M3508 driven by RC10_LIB's speed loop.
 #[derive(Debug)]
@@ -33,38 +54,46 @@ struct LoopState {
     target: Option<f32>,
 }
 
-/// RC10_LIB's incremental PID step as this comparison reproduces it, kept apart from rc10's
-/// own [`IncrementalPid`](rc10_core::pid::IncrementalPid), which differs on purpose: the
-/// error history starts at zero (the first step kicks by kp·e) and shifts on every call,
-/// inside the deadband too (rc10 leaves it alone there), while the output moves only
-/// outside the band; its D term is the fixed-dt `kd·(e − 2e₁ + e₂)/dt` (rc10 takes the change of
-/// `kd·ė` over the time since the last error outside the band; the demo's kd is 0).
+/// RC10_LIB's incremental PID step, kept apart from rc10's own
+/// [`IncrementalPid`](rc10_core::pid::IncrementalPid), which differs on purpose. RC10_LIB's:
+/// - outputs 0 on its first call, and takes that call's error as the previous one: the
+///   proportional term only ever adds the error's *changes*, so a step is not met by a kick
+///   of kp·e but by the integral alone;
+/// - sets an error inside the deadband to 0 and still applies the increments: entering the
+///   band steps the output back by kp times the last error, and leaving it steps it up by kp
+///   times the new one (rc10 leaves the output and the history alone inside the band);
+/// - adds `ki · e` and `kd · (e − 2e₁ + e₂)` per call, with no `dt`: each call is one tick,
+///   however much time passed (its `dt` only feeds the differentiator, off here);
+/// - clamps the output, and carries the clamped output into the next call.
 #[derive(Debug, Default)]
 struct LegacyPid {
     /// Output, mA.
     output: f32,
-    /// The previous two errors, rpm.
+    /// The previous two errors after the deadband, rpm.
     history: (f32, f32),
+    /// Whether the first call has been made.
+    started: bool,
 }
 
 impl LegacyPid {
-    /// One step with [`RC10_DEMO_SPEED_PID`]; returns the output in mA. Like RC10_LIB's
-    /// `pid_calc`, it takes every call to be one 1 ms tick ([`LEGACY_DT_S`]), whatever time
-    /// passed: after a scheduler stall its integral grows by one tick's worth, not the stall's.
+    /// One step with [`RC10_DEMO_SPEED_GAINS`]; returns the output in mA.
     fn step(&mut self, target: f32, measurement: f32) -> f32 {
-        let c = RC10_DEMO_SPEED_PID;
-        let e = target - measurement;
-        let (e1, e2) = self.history;
-        if e.abs() > c.deadband {
-            let p = c.kp * (e - e1);
-            let i = c.ki * e * LEGACY_DT_S;
-            let d = if c.kd == 0.0 {
-                0.0
-            } else {
-                c.kd * (e - 2.0 * e1 + e2) / LEGACY_DT_S
-            };
-            self.output = (self.output + p + i + d).clamp(-c.output_limit, c.output_limit);
+        let g = RC10_DEMO_SPEED_GAINS;
+        let mut e = target - measurement;
+        if e.abs() < g.deadband_rpm {
+            e = 0.0;
         }
+        let (e1, e2) = self.history;
+        if self.started {
+            let p = g.kp * (e - e1);
+            let i = g.ki_per_call * e;
+            let d = g.kd * (e - 2.0 * e1 + e2);
+            self.output += p + i + d;
+        } else {
+            self.started = true;
+            self.output = 0.0;
+        }
+        self.output = self.output.clamp(-g.output_limit_ma, g.output_limit_ma);
         self.history = (e, e1);
         self.output
     }
@@ -166,27 +195,53 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_comparison_pid_kicks_on_its_first_step_and_shifts_history_inside_the_band() {
+    fn the_comparison_pid_starts_at_zero_and_never_kicks_by_kp_e() {
         let mut pid = LegacyPid::default();
-        // From a zero history: P = 18 · 300, I = 15 · 300 · 0.001.
-        assert!((pid.step(300.0, 0.0) - 5404.5).abs() < 1e-3);
+        // First call: 0, whatever the error.
+        assert_eq!(pid.step(300.0, 0.0), 0.0);
+        // The error has not changed: no P; I = 0.015 · 300 per call.
+        assert!((pid.step(300.0, 0.0) - 4.5).abs() < 1e-4);
+        assert!((pid.step(300.0, 0.0) - 9.0).abs() < 1e-4);
+        // The error shrinks by 100: P = 18 · (200 − 300) = −1800, I = 3.
+        assert!((pid.step(300.0, 100.0) - (9.0 - 1800.0 + 3.0)).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_comparison_pid_zeroes_the_error_in_the_band_and_still_applies_the_increments() {
         let mut pid = LegacyPid::default();
-        pid.step(7.0, 0.0); // 18 · 7 + 15 · 7 · 0.001 = 126.105
-        // Inside the band: no output change, but the history takes the 3.
-        assert!((pid.step(3.0, 0.0) - 126.105).abs() < 1e-3);
-        // Out again at 7: P = 18 · (7 − 3) = 72, I = 0.105.
-        assert!((pid.step(7.0, 0.0) - 198.21).abs() < 1e-3);
+        pid.step(7.0, 0.0); // 0; history 7
+        // Still 7: I = 0.105.
+        assert!((pid.step(7.0, 0.0) - 0.105).abs() < 1e-5);
+        // 3 rpm is inside the 5 rpm band: e = 0, P = 18 · (0 − 7) = −126, I = 0.
+        assert!((pid.step(3.0, 0.0) - (0.105 - 126.0)).abs() < 1e-3);
+        // Inside again: nothing changes.
+        assert!((pid.step(4.9, 0.0) - (0.105 - 126.0)).abs() < 1e-3);
+        // Out at 7: P = 18 · (7 − 0) = 126, I = 0.105.
+        assert!((pid.step(7.0, 0.0) - 0.21).abs() < 1e-3);
+        // Exactly 5 rpm is outside the band (RC10_LIB's `fabs(e) < deadband`): P = 18 · (5 − 7).
+        assert!((pid.step(5.0, 0.0) - (0.21 - 36.0 + 0.075)).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_comparison_pid_clamps_and_carries_the_clamped_output() {
+        let mut pid = LegacyPid::default();
+        pid.step(0.0, 0.0);
+        // A 1000 rpm jump: P = 18 000, I = 15, clamped to 15 000 mA.
+        assert_eq!(pid.step(1000.0, 0.0), 15_000.0);
+        // The error falls to 900: P = −1800, I = 13.5, from the clamped 15 000.
+        assert!((pid.step(1000.0, 100.0) - (15_000.0 - 1800.0 + 13.5)).abs() < 1e-2);
     }
 
     #[test]
     fn the_comparison_loop_integrates_one_tick_per_call_after_a_stall() {
         let motor = LegacyM3508::new(1).unwrap();
         motor.set_target_rpm(100.0).unwrap();
-        // First call after a 50 ms stall: I = 15 · 100 · 0.001 (RC10_LIB's fixed dt), not
-        // 15 · 100 · 0.05; P = 18 · 100 from the zero history. 1801.5 mA.
-        motor.update(Instant::from_micros(50_000), 0.05);
+        motor.update(Instant::from_micros(1_000), 0.001); // first call: 0
+        // The next call comes after a 50 ms stall: I = 0.015 · 100 (one call's worth), not
+        // 50 calls' worth; P = 0 (the error did not change). 1.5 mA.
+        motor.update(Instant::from_micros(51_000), 0.05);
         // The current target the loop gave the DJI driver (its command stays 0: offline).
         let amps = motor.inner.state().target;
-        assert!((amps - 1.8015).abs() < 1e-4, "{amps}");
+        assert!((amps - 0.0015).abs() < 1e-6, "{amps}");
     }
 }

@@ -35,10 +35,13 @@ pub fn builtin() -> Vec<Scenario> {
         tx_order: TxOrder::Fifo,
         chassis: None,
     };
+    // The speed loop holds 0 rpm from the start and steps to 300 rpm at 10 ms: a step of a
+    // loop already closed (RC10_LIB's incremental PID answers a step on its very first call
+    // with the integral alone; see `legacy`).
     let speed_step = |motor| TargetSpec {
         motor,
         kind: TargetKind::Rpm,
-        steps: vec![(10, 300.0)],
+        steps: vec![(0, 0.0), (10, 300.0)],
     };
     vec![
         Scenario {
