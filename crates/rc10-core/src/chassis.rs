@@ -296,8 +296,9 @@ impl LinearChassis<4> {
     ///
     /// Wheel `i` at `(xᵢ, yᵢ)` with roller sign `sᵢ` has rim speed
     /// `vx − ω·yᵢ + sᵢ·(vy + ω·xᵢ)`: for O rollers `s = (−1, +1, +1, −1)`, which gives the
-    /// familiar `vx ∓ vy ∓ (a + b)·ω` with `a`, `b` half the wheelbase and track. X rollers
-    /// give `±(a − b)·ω` instead (see [`MecanumRollers::X`]).
+    /// familiar rows, with `k = a + b` (`a`, `b` half the wheelbase and track):
+    /// FL `vx − vy − k·ω`, FR `vx + vy + k·ω`, RL `vx + vy − k·ω`, RR `vx − vy + k·ω`.
+    /// X rollers give `k = a − b` instead (see [`MecanumRollers::X`]).
     pub fn mecanum(config: MecanumConfig) -> Result<Self, ChassisError> {
         let a = positive(config.wheelbase_m)? / 2.0;
         let b = positive(config.track_m)? / 2.0;
@@ -356,11 +357,21 @@ fn scale_to_limit(values: &mut [f32], max: f32) {
     }
 }
 
+/// A finite angle brought into (−π, π] radians; a non-finite one as it is.
+fn steer_range(angle_rad: f32) -> f32 {
+    if !angle_rad.is_finite() {
+        return angle_rad;
+    }
+    let a = wrap_rad_pi(angle_rad);
+    if a <= -PI { a + TAU } else { a }
+}
+
 /// One swerve module's command.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ModuleState {
-    /// Steering angle in radians, (−π, π], relative to the robot's x axis.
+    /// Steering angle in radians, relative to the robot's x axis: (−π, π] in what
+    /// [`Swerve::modules`] returns.
     pub steer_rad: f32,
     /// Wheel output-shaft rpm (negative: the wheel runs backwards).
     pub wheel_rpm: f32,
@@ -407,15 +418,20 @@ impl Swerve {
 
     /// Module commands for `twist`, steering each module the shortest way from `current`
     /// (reversing the wheel instead of turning more than 90°). A module whose speed is zero
-    /// keeps its present angle (no snapping back to 0 when the robot stops); a non-finite
-    /// twist stops all wheels at their present angles.
+    /// keeps its present angle (no snapping back to 0 when the robot stops), brought into
+    /// (−π, π] (a NaN present angle stays NaN, which a motor's `set_target_*` refuses). A
+    /// non-finite twist, or one so large that a wheel's rpm overflows `f32`, stops all wheels
+    /// at their present angles.
     pub fn modules(&self, twist: Twist, current: &[ModuleState; 4]) -> [ModuleState; 4] {
-        let mut out = *current;
+        let stopped = current.map(|m| ModuleState {
+            steer_rad: steer_range(m.steer_rad),
+            wheel_rpm: 0.0,
+        });
+        if !twist.is_finite() {
+            return stopped;
+        }
+        let mut out = stopped;
         for ((o, (x, y)), now) in out.iter_mut().zip(&self.positions).zip(current) {
-            o.wheel_rpm = 0.0;
-            if !twist.is_finite() {
-                continue;
-            }
             let vx = twist.vx_m_s - twist.omega_rad_s * y;
             let vy = twist.vy_m_s + twist.omega_rad_s * x;
             let speed = libm::hypotf(vx, vy);
@@ -428,8 +444,11 @@ impl Swerve {
                 angle = wrap_rad_pi(angle + PI);
                 rpm = -rpm;
             }
-            o.steer_rad = if angle <= -PI { angle + TAU } else { angle };
+            o.steer_rad = steer_range(angle);
             o.wheel_rpm = rpm;
+        }
+        if out.iter().any(|m| !m.wheel_rpm.is_finite()) {
+            return stopped;
         }
         out
     }
@@ -649,8 +668,10 @@ impl Odometry {
     }
 
     /// Advances `dt_s` seconds with the robot-frame `twist` (its `omega_rad_s` unused), to
-    /// the heading `yaw_rad` a gyro reads at the end of the step (any convention: only its
-    /// change counts, the shorter way round, and the pose's heading follows the gyro's
+    /// the heading `yaw_rad` a gyro reads at the end of the step (any zero and any wrap, but
+    /// counter-clockwise positive seen from above, as the pose's heading is: negate a
+    /// clockwise-positive (NED) yaw. Only its change counts, the shorter way round, and the
+    /// pose's heading follows the gyro's
     /// changes from the heading the pose had; the first call has no change to go by and moves
     /// without turning). Call it often enough that the gyro turns less than half a turn
     /// between calls: a change of π or more is taken the other way round. Returns `false`,
@@ -971,6 +992,45 @@ mod tests {
         for (a, b) in stopped.iter().zip(&turned) {
             assert_eq!(a.steer_rad, b.steer_rad);
             assert_eq!(a.wheel_rpm, 0.0);
+        }
+    }
+
+    #[test]
+    fn swerve_stopped_module_angle_is_brought_into_range() {
+        let s = Swerve::new(0.5, 0.5, 0.05).unwrap();
+        let steer = [4.0, -PI, 1.0, f32::NAN];
+        let now = steer.map(|a| ModuleState {
+            steer_rad: a,
+            wheel_rpm: 0.0,
+        });
+        let out = s.modules(Twist::ZERO, &now);
+        // 4 rad is 4 − 2π = −2.2832 rad; −π is the same heading as π, the range's end.
+        assert!((out[0].steer_rad - (4.0 - TAU)).abs() < 1e-6);
+        assert_eq!(out[1].steer_rad, PI);
+        assert_eq!(out[2].steer_rad, 1.0);
+        assert!(out[3].steer_rad.is_nan());
+        assert!(out.iter().all(|m| m.wheel_rpm == 0.0));
+    }
+
+    #[test]
+    fn swerve_twist_whose_wheel_speed_overflows_stops_every_wheel() {
+        let s = Swerve::new(0.5, 0.5, 0.05).unwrap();
+        let now = [ModuleState {
+            steer_rad: 0.3,
+            wheel_rpm: 100.0,
+        }; 4];
+        // 1e38 m/s on a 0.05 m wheel is 1.9e40 rpm: beyond f32. Before, the rpm was
+        // infinite and the limited version's scale (500 / ∞ = 0) made it NaN.
+        for out in [
+            s.modules(Twist::new(1e38, 0.0, 0.0), &now),
+            s.modules_limited(Twist::new(1e38, 0.0, 0.0), &now, 500.0),
+            // Spinning at 3e38 rad/s: each module moves at 1.06e38 m/s (finite), 2e40 rpm.
+            s.modules(Twist::new(0.0, 0.0, 3e38), &now),
+        ] {
+            for m in out {
+                assert_eq!(m.wheel_rpm, 0.0);
+                assert_eq!(m.steer_rad, 0.3);
+            }
         }
     }
 

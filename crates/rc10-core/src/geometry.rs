@@ -319,6 +319,11 @@ mod tests {
         let down = Transform3D::from_pose(Pose3D::new(0.0, 0.0, 0.0, 0.0, FRAC_PI_2, 0.5));
         let want = Point3::new(-libm::sinf(0.5), libm::cosf(0.5), 0.0);
         assert!((down.apply(Point3::new(0.0, 1.0, 0.0)) - want).norm() < 1e-6);
+        // And its x axis (forward) points down, then nowhere else: Ry(+90°)·(1, 0, 0) is
+        // (cos 90°, 0, −sin 90°) = (0, 0, −1), which yaw leaves alone.
+        assert!(
+            (down.apply(Point3::new(1.0, 0.0, 0.0)) - Point3::new(0.0, 0.0, -1.0)).norm() < 1e-6
+        );
         let pose = down.to_pose();
         // At +90° only roll − yaw is defined: −0.5, carried in roll.
         assert!((pose.pitch_rad - FRAC_PI_2).abs() < 1e-3, "{pose:?}");
@@ -361,12 +366,17 @@ mod tests {
     }
 
     #[test]
-    fn copies_are_independent() {
+    fn transforms_are_plain_values_and_compose() {
+        // RC10_LIB's transforms did not copy safely. Here every pose and transform is `Copy`
+        // (a plain value, no shared storage): this fails to build if one stops being.
+        fn plain_value<T: Copy>() {}
+        plain_value::<Transform2D>();
+        plain_value::<Transform3D>();
+        plain_value::<Pose2D>();
+        plain_value::<Pose3D>();
+        // Composing a 1 m step with itself: 2 m.
         let a = Transform2D::from_pose(Pose2D::new(1.0, 0.0, 0.0));
-        let mut b = a;
-        b = b * b;
-        assert_eq!(a.to_pose().x, 1.0);
-        assert_eq!(b.to_pose().x, 2.0);
+        assert_eq!((a * a).to_pose().x, 2.0);
     }
 
     proptest! {

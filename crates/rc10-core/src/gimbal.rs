@@ -7,7 +7,9 @@ use crate::math::{constrain, floor, wrap_deg_180, wrap_deg_360};
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GimbalLimits {
-    /// Lowest pitch, degrees (negative is down). Reversed pitch bounds are swapped; a NaN or
+    /// Lowest pitch, degrees (negative is down: the opposite of [`geometry`](crate::geometry)'s
+    /// ZYX pitch about a y axis pointing left, which is positive nose-down; negate a
+    /// `Pose3D::pitch_rad` before using it here). Reversed pitch bounds are swapped; a NaN or
     /// infinite bound leaves that side open, as for the yaw range (check a computed limit).
     pub pitch_min_deg: f32,
     /// Highest pitch, degrees.
