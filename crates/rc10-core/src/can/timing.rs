@@ -33,7 +33,9 @@ pub fn unstuffed_bits(frame: &CanFrame) -> u32 {
     header + 8 * frame.data().len() as u32
 }
 
-/// The most bits a frame of this kind and length can take with worst-case stuffing.
+/// An upper bound on the bits a frame of this kind and length takes: one stuff bit for
+/// every four bits after the first of the stuffed region (the textbook worst case, which
+/// real frames do not reach: the CRC depends on the data; [`frame_bits`] is exact).
 ///
 /// ```
 /// use rc10_core::can::timing;
@@ -56,8 +58,8 @@ pub fn worst_case_bits(extended: bool, data_len: usize) -> u32 {
 /// ```
 /// use rc10_core::can::{CanFrame, timing};
 /// let f = CanFrame::standard(0x200, &[0; 8]).unwrap();
-/// let bits = timing::frame_bits(&f);
-/// assert!(bits > 111 && bits <= 135); // zeros stuff heavily
+/// // 111 bits before stuffing; zeros stuff heavily: 15 stuff bits.
+/// assert_eq!(timing::frame_bits(&f), 126);
 /// ```
 #[allow(
     clippy::arithmetic_side_effects,

@@ -297,6 +297,22 @@ mod tests {
     }
 
     #[test]
+    fn mouse_buttons_and_wheel_come_from_bytes_12_to_17() {
+        let mut b = encode([1024; 4], 3, 3, [0; 3], 0);
+        // Left button only (byte 12), then right only (byte 13); the wheel at 1684 in bytes
+        // 16–17, little-endian: 0x694 → 94 06.
+        b[12] = 1;
+        b[16..18].copy_from_slice(&[0x94, 0x06]);
+        let f = DbusFrame::parse(&b).unwrap();
+        assert!(f.mouse_left && !f.mouse_right);
+        assert_eq!(f.wheel, 1684);
+        b[12] = 0;
+        b[13] = 1;
+        let f = DbusFrame::parse(&b).unwrap();
+        assert!(!f.mouse_left && f.mouse_right);
+    }
+
+    #[test]
     fn sticks_a_little_past_full_scale_are_accepted_and_read_as_full_scale() {
         // DJI's examples reject a channel only beyond ±700 from 1024: 1724 and 324 are the
         // last values kept, 1725 and 323 the first refused.

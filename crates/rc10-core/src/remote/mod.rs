@@ -625,7 +625,8 @@ mod tests {
         assert_eq!(normalize(364, 1024, 660, 0.0), -1.0);
         assert_eq!(normalize(2000, 1024, 660, 0.0), 1.0); // clamped
         assert_eq!(normalize(1030, 1024, 660, 0.05), 0.0); // 0.009 inside the band
-        // Halfway between band edge (0.05) and 1: (0.525 − 0.05) / 0.95 = 0.5.
-        assert!((normalize(1024 + 346, 1024, 660, 0.05) - 0.5).abs() < 1e-3);
+        // Near halfway between the band's edge (0.05) and 1: 346 / 660 = 0.52424, and
+        // (0.52424 − 0.05) / 0.95 = 0.49920 (exactly half would need 346.5 counts).
+        assert!((normalize(1024 + 346, 1024, 660, 0.05) - 0.49920).abs() < 1e-5);
     }
 }

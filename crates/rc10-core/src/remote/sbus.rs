@@ -6,7 +6,8 @@
 //! receivers that interleave telemetry slots).
 //!
 //! Scaling: [`SbusFrame::channel`] uses FrSky's (OpenTX/EdgeTX) convention, ±100 % at
-//! 172…1811 around 992. Futaba receivers centre near 1024 with a different span: use
+//! 172…1811 around 992 (a half-span of 819.2 counts: [`HALF_RANGE`] is 819, so that both
+//! ends read ±1). Futaba receivers centre near 1024 with a different span: use
 //! [`SbusFrame::channel_scaled`] with your receiver's centre and span (read them from
 //! `channels` with the sticks centred and at full throw).
 //!
@@ -23,8 +24,10 @@ pub const FRAME_LEN: usize = 25;
 pub const HEADER: u8 = 0x0F;
 /// Channel centre, FrSky convention (1500 µs).
 pub const CENTER: u16 = 992;
-/// Distance from centre to full scale (±100 %), FrSky convention.
-pub const HALF_RANGE: u16 = 820;
+/// Distance from centre to full scale (±100 %), FrSky convention: 1024 · 0.8 = 819.2 counts
+/// (172 and 1811 are 820 and 819 from [`CENTER`]), rounded down so that full throw reads
+/// +1 as well as −1.
+pub const HALF_RANGE: u16 = 819;
 
 /// One decoded SBUS frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -176,7 +179,23 @@ mod tests {
         let f = SbusFrame::parse(&encode(ch, 0b0101, 0x00)).unwrap();
         assert_eq!(f.channels, ch);
         assert!(f.ch17 && !f.ch18 && f.frame_lost && !f.failsafe);
-        assert_eq!(f.channel(0, 0.0), -1.0); // (172 − 992) / 820 = −1.0
+        assert_eq!(f.channel(0, 0.0), -1.0); // (172 − 992) / 819, −1.001: full scale
+        // The other flags: channel 18 and failsafe.
+        let f = SbusFrame::parse(&encode(ch, 0b1010, 0x00)).unwrap();
+        assert!(!f.ch17 && f.ch18 && !f.frame_lost && f.failsafe);
+    }
+
+    #[test]
+    fn full_throw_reads_full_scale_both_ways() {
+        let mut ch = [992u16; 16];
+        ch[0] = 1811; // +100 % in OpenTX/EdgeTX
+        ch[1] = 172; // −100 %
+        ch[2] = 992 + 410; // +50 % of 819.2 is 409.6
+        let f = SbusFrame::parse(&encode(ch, 0, 0x00)).unwrap();
+        assert_eq!(f.channel(0, 0.0), 1.0);
+        assert_eq!(f.channel(1, 0.0), -1.0);
+        assert!((f.channel(2, 0.0) - 0.5).abs() < 1e-3);
+        assert_eq!(f.channel(3, 0.0), 0.0);
     }
 
     #[test]
@@ -212,12 +231,12 @@ mod tests {
 
     #[test]
     fn futaba_scaling_centres_on_its_own_neutral() {
-        // A Futaba receiver's neutral reads 1024: FrSky scaling shows (1024 − 992)/820 ≈ 0.04
+        // A Futaba receiver's neutral reads 1024: FrSky scaling shows (1024 − 992)/819 ≈ 0.04
         // there, its own centre 0.
         let mut ch = [1024; 16];
         ch[1] = 1024 + 672;
         let f = SbusFrame::parse(&encode(ch, 0, 0)).unwrap();
-        assert!((f.channel(0, 0.0) - 32.0 / 820.0).abs() < 1e-6);
+        assert!((f.channel(0, 0.0) - 32.0 / 819.0).abs() < 1e-6);
         assert_eq!(f.channel_scaled(0, 1024, 672, 0.0), 0.0);
         assert_eq!(f.channel_scaled(1, 1024, 672, 0.0), 1.0);
     }

@@ -54,14 +54,17 @@ fn sbus_all(raw: u16) -> [u8; 25] {
 
 #[test]
 fn sbus_channels_scale_around_992() {
-    // 992 is centre (0), 992 ± 820 full scale (±1).
+    // OpenTX/EdgeTX: 992 is centre (0), 172 and 1811 full scale (−1, +1); ±100 % is 819.2
+    // counts, so −50 % is 992 − 409.6.
     let centre = SbusFrame::parse(&sbus_all(992)).unwrap();
     assert_eq!(centre.channel(0, 0.0), 0.0);
     assert_eq!(centre.channel(15, 0.0), 0.0);
-    let top = SbusFrame::parse(&sbus_all(992 + 820)).unwrap();
-    assert!((top.channel(3, 0.0) - 1.0).abs() < 1e-6);
+    let top = SbusFrame::parse(&sbus_all(1811)).unwrap();
+    assert_eq!(top.channel(3, 0.0), 1.0);
+    let bottom = SbusFrame::parse(&sbus_all(172)).unwrap();
+    assert_eq!(bottom.channel(3, 0.0), -1.0);
     let half_down = SbusFrame::parse(&sbus_all(992 - 410)).unwrap();
-    assert!((half_down.channel(7, 0.0) + 0.5).abs() < 1e-6);
+    assert!((half_down.channel(7, 0.0) + 0.5).abs() < 1e-3);
 }
 
 #[test]
