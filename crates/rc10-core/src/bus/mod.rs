@@ -19,7 +19,9 @@
 //! Every period (1 ms by default): `update(now, dt)` on every node in registration order
 //! (control math only), then `pack_command` on every node (frame assembly only: DJI slots with
 //! the same command ID merge into one frame), then the frames are handed to the transport with
-//! `try_send`, in packing order. Frames the transport cannot queue (TX buffers still full from
+//! `try_send`, in packing order (after a tick in which the transport refused a frame, from
+//! that frame on, so no node's frame is refused every tick: see [`Bus::transmit`]). Frames
+//! the transport cannot queue (TX buffers still full from
 //! an earlier tick, or bus-off) are counted in [`BusStats`], never waited for: the next tick
 //! sends fresh commands anyway. After a stall the missed ticks are skipped, not run back to
 //! back ([`TickPacer`]).

@@ -55,6 +55,9 @@ pub struct Cascade {
     speed_target_rpm: f32,
     feed_forward: f32,
     output: f32,
+    /// Whether `output` reached the motor: a step ran since the cascade was built, reset
+    /// (offline) or disabled.
+    applied: bool,
 }
 
 impl Cascade {
@@ -79,6 +82,7 @@ impl Cascade {
             speed_target_rpm: 0.0,
             feed_forward: 0.0,
             output: 0.0,
+            applied: false,
         })
     }
 
@@ -184,9 +188,10 @@ impl Cascade {
                 self.speed.reset();
                 // From an open-loop mode, start at what the motor really got (already within
                 // the limit that was in force): at zero error the output is integral +
-                // feed-forward. From Disabled nothing was applied: start from the
-                // feed-forward alone (e.g. holding an arm against gravity at once).
-                if self.mode != ControlMode::Disabled {
+                // feed-forward. From Disabled, or while nothing has been applied since the
+                // motor came (back) online, start from the feed-forward alone (e.g. holding
+                // an arm against gravity at once).
+                if self.applied {
                     self.speed.set_integral(self.output - self.feed_forward);
                 }
             }
@@ -207,6 +212,7 @@ impl Cascade {
             }
             if mode == ControlMode::Disabled {
                 self.output = 0.0;
+                self.applied = false;
             }
             self.mode = mode;
         }
@@ -219,6 +225,7 @@ impl Cascade {
         self.speed.reset();
         self.angle.reset();
         self.output = 0.0;
+        self.applied = false;
         self.speed_target_rpm = 0.0;
         self.ticks_since_angle = u8::MAX;
         self.angle_dt_s = 0.0;
@@ -237,6 +244,7 @@ impl Cascade {
             ControlMode::Current | ControlMode::Voltage | ControlMode::Torque => {
                 // A NaN or negative limit counts as zero (the speed loop does the same).
                 self.output = saturate(self.target, if limit > 0.0 { limit } else { 0.0 });
+                self.applied = true;
                 return self.output;
             }
             ControlMode::Speed => self.target,
@@ -276,6 +284,7 @@ impl Cascade {
             dt_s,
             limit,
         );
+        self.applied = true;
         self.output
     }
 }
@@ -380,6 +389,27 @@ mod tests {
         // Bumpless into speed mode with a feed-forward: still 1 A at zero error.
         c.set_target(ControlMode::Speed, 0.0);
         assert!((c.step(&Measured::default(), 0.001, 20.0) - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_mode_switch_while_nothing_is_applied_starts_from_the_feed_forward() {
+        // Holding an arm against gravity: 2 A of feed-forward. The motor goes offline
+        // (`reset`) in current mode and the application switches to speed mode meanwhile:
+        // back online, at zero error, the arm gets its 2 A at once, as from Disabled (it got
+        // 0 A offline: starting from that would cancel the feed-forward).
+        let mut c = cascade();
+        c.set_feed_forward(2.0);
+        c.set_target(ControlMode::Current, 1.0);
+        assert_eq!(c.step(&Measured::default(), 0.001, 20.0), 1.0);
+        c.reset();
+        c.set_target(ControlMode::Speed, 0.0);
+        assert!((c.step(&Measured::default(), 0.001, 20.0) - 2.0).abs() < 1e-6);
+        // The same before the first step ever (a motor not yet online).
+        let mut c = cascade();
+        c.set_feed_forward(2.0);
+        c.set_target(ControlMode::Current, 1.0);
+        c.set_target(ControlMode::Speed, 0.0);
+        assert!((c.step(&Measured::default(), 0.001, 20.0) - 2.0).abs() < 1e-6);
     }
 
     #[test]

@@ -107,7 +107,10 @@ impl core::error::Error for TargetError {}
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct MotorState {
-    /// Whether feedback arrived within the offline timeout.
+    /// Whether feedback arrived within the offline timeout. The measured fields below
+    /// (speed, angles, current, temperature) are those of the last accepted frame: while
+    /// offline they keep their last values, so check this (or `last_feedback`) before
+    /// integrating a speed, for odometry say.
     pub online: bool,
     /// Current control mode.
     pub mode: ControlMode,
@@ -351,8 +354,13 @@ impl Liveness {
     };
 
     /// Records accepted feedback received at `now` (the motor is online from the next check).
+    /// A stamp before the last one (a transport that stamps frames itself and delivers one
+    /// late) leaves the last one: the newest feedback decides, and the next frame's interval
+    /// is measured from it.
     pub fn record_feedback(&mut self, now: Instant) {
-        self.last_feedback = Some(now);
+        if self.last_feedback.is_none_or(|last| now > last) {
+            self.last_feedback = Some(now);
+        }
     }
 
     /// Re-evaluates at `now` under `health`; returns `true` exactly when the motor has just

@@ -646,13 +646,14 @@ impl DjiMotor {
             // speed says how far the rotor went in each candidate interval, and the encoder
             // takes the one the reading fits (see `Encoder::update_periodic`). The timestamps
             // only centre the search, as they may be read late. A stamp more than two periods
-            // after the last tick is not trusted at all (a bogus or far-future stamp): the
-            // interval is then taken as one period.
+            // after the last tick is not trusted at all (a bogus or far-future stamp), nor one
+            // before the last frame's: the interval is then taken as one period. Under half a
+            // period (the same stamp included) the frame may be a copy of the last one.
             let trusted = s
                 .last_tick
                 .is_none_or(|tick| now.saturating_duration_since(tick) <= TRUST_AHEAD);
             let gap_periods = match s.liveness.last_feedback() {
-                Some(prev) if trusted && now > prev => {
+                Some(prev) if trusted && now >= prev => {
                     // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
                     let gap = now.saturating_duration_since(prev);
                     u32::try_from(gap.as_micros()).unwrap_or(u32::MAX) as f32
