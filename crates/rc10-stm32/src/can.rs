@@ -37,8 +37,9 @@
 use crate::status;
 use core::cell::Cell;
 use core::future::Future;
+use core::num::{NonZeroU8, NonZeroU16};
 use core::task::{Context, Poll, Waker};
-use embassy_stm32::can::config::{GlobalFilter, TxBufferMode};
+use embassy_stm32::can::config::{GlobalFilter, NominalBitTiming, TxBufferMode};
 use embassy_stm32::can::filter::{
     Action, EXTENDED_FILTER_MAX, ExtendedFilter, FilterType, STANDARD_FILTER_MAX, StandardFilter,
 };
@@ -46,6 +47,7 @@ use embassy_stm32::can::{CanConfigurator, CanRx, CanTx, Frame};
 use embassy_stm32::pac;
 use embedded_can::Frame as _;
 use rc10_core::can::acceptance::{Fifo, FilterElement, FilterPlan};
+use rc10_core::can::timing::bit_timing;
 use rc10_core::can::{
     BusStatus, CanFrame, CanReceive, CanTransmit, ExtendedId, ReceiveError, Received, SendError,
     StandardId,
@@ -96,6 +98,17 @@ impl Instance {
             Self::Fdcan3 => pac::FDCAN3,
         }
     }
+
+    /// The FDCAN kernel clock (`config.rcc.mux.fdcansel`), Hz.
+    fn kernel_clock_hz(self) -> u32 {
+        use embassy_stm32::peripherals::{FDCAN1, FDCAN2, FDCAN3};
+        use embassy_stm32::rcc::frequency;
+        match self {
+            Self::Fdcan1 => frequency::<FDCAN1>().0,
+            Self::Fdcan2 => frequency::<FDCAN2>().0,
+            Self::Fdcan3 => frequency::<FDCAN3>().0,
+        }
+    }
 }
 
 /// Configures a FDCAN for rc10 and starts it in normal mode: classic CAN at `bitrate_bps`,
@@ -110,6 +123,11 @@ impl Instance {
 /// The FDCAN kernel clock must be configured (`config.rcc.mux.fdcansel`, e.g. PCLK1) before
 /// `CanConfigurator::new`: its default source is HSE, so without HSE enabled it panics at run
 /// time (with HSE enabled, the FDCAN runs from the crystal directly).
+///
+/// The bit timing is [`rc10_core::can::timing::bit_timing`]'s for that clock: at 1 Mbit/s
+/// from 170 MHz, 10 quanta sampled at 80 % with a jump width of 2 (from 85 MHz, 17 quanta
+/// at 82 %, jump width 3), close to the 78.6 % DJI's RoboMaster boards use. A bitrate no
+/// whole number of 8–25 quanta gives falls back to embassy-stm32's `set_bitrate`.
 ///
 /// # Panics
 ///
@@ -133,7 +151,23 @@ pub fn start(
     if !status::in_configuration(cccr.init(), cccr.cce()) {
         return Err(WrongInstance(instance));
     }
-    configurator.set_bitrate(bitrate_bps);
+    // rc10's timing (sample point 80 %, the widest jump width); embassy-stm32's own search,
+    // which panics when nothing fits, only when no 8–25 quanta give the bitrate exactly.
+    let timing = bit_timing(instance.kernel_clock_hz(), bitrate_bps).and_then(|t| {
+        Some(NominalBitTiming {
+            prescaler: NonZeroU16::new(t.prescaler)?,
+            seg1: NonZeroU8::new(t.seg1)?,
+            seg2: NonZeroU8::new(t.seg2)?,
+            sync_jump_width: NonZeroU8::new(t.sync_jump_width)?,
+        })
+    });
+    match timing {
+        Some(timing) => {
+            let config = configurator.config().set_nominal_bit_timing(timing);
+            configurator.set_config(config);
+        }
+        None => configurator.set_bitrate(bitrate_bps),
+    }
     let config = configurator
         .config()
         .set_tx_buffer_mode(TxBufferMode::Fifo)

@@ -78,8 +78,9 @@ pub enum Crystal {
 
 /// embassy-stm32 configuration for an STM32G4 at 170 MHz from the board's crystal (PLL input
 /// 4 MHz · 85 = 340 MHz VCO, / 2 = 170 MHz; voltage range 1 boost), with the FDCAN kernel
-/// clock on PCLK1 (170 MHz; embassy-stm32 derives the 1 Mbit/s bit timing from it in
-/// [`can::start`]).
+/// clock on PCLK1 (170 MHz; [`can::start`] derives the 1 Mbit/s bit timing from it). The
+/// HSE is a crystal (`HseMode::Oscillator`); a board fed a clock signal instead (ST-LINK's
+/// MCO, a TCXO) needs `HseMode::Bypass`: change `config.rcc.hse` after this.
 ///
 /// Why a crystal: CAN at 1 Mbit/s tolerates only a few tenths of a percent of clock error
 /// between nodes, and the internal HSI is specified to about ±1 %: fine on the bench, out of

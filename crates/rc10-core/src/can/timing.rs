@@ -102,6 +102,132 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
     len + stuffed + UNSTUFFED_TAIL_BITS
 }
 
+/// A controller's nominal bit timing: the CAN clock divided by `prescaler` gives the time
+/// quantum; a bit is 1 (sync) + `seg1` (propagation and phase 1) + `seg2` (phase 2) quanta,
+/// sampled after `1 + seg1` of them; a node resynchronises by up to `sync_jump_width` quanta
+/// per edge. The fields are counts, not register values (the FDCAN's `NBTP` holds each minus
+/// one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BitTiming {
+    /// Clock cycles per time quantum, 1–512.
+    pub prescaler: u16,
+    /// Quanta before the sample point, after the sync quantum, 1–255.
+    pub seg1: u8,
+    /// Quanta after the sample point, 1–128.
+    pub seg2: u8,
+    /// Resynchronisation jump width in quanta, 1–128, at most `seg2`.
+    pub sync_jump_width: u8,
+}
+
+impl BitTiming {
+    /// Quanta per bit.
+    #[allow(clippy::arithmetic_side_effects, reason = "u8 + u8 + 1 fits a u32")]
+    pub fn quanta_per_bit(&self) -> u32 {
+        1 + u32::from(self.seg1) + u32::from(self.seg2)
+    }
+
+    /// The sample point in per mille of the bit time (rounded down).
+    #[allow(
+        clippy::arithmetic_side_effects,
+        reason = "at most 1000 · 256; quanta_per_bit ≥ 1"
+    )]
+    pub fn sample_point_permille(&self) -> u32 {
+        1000 * (1 + u32::from(self.seg1)) / self.quanta_per_bit()
+    }
+
+    /// The bitrate this timing gives from a `clock_hz` CAN clock, in bit/s (rounded down).
+    pub fn bitrate_bps(&self, clock_hz: u32) -> u32 {
+        let cycles = u64::from(self.prescaler).saturating_mul(u64::from(self.quanta_per_bit()));
+        u64::from(clock_hz)
+            .checked_div(cycles)
+            .and_then(|b| u32::try_from(b).ok())
+            .unwrap_or(0)
+    }
+}
+
+/// The nominal bit timing for `bitrate_bps` from a `clock_hz` CAN clock, exact (no bitrate
+/// error), or `None` when no prescaler gives 8–25 quanta per bit exactly.
+///
+/// The sample point is put nearest 80 % from 800 kbit/s up and 87.5 % below (CiA 301
+/// recommends 75 % at 1 Mbit/s and 87.5 % up to 500 kbit/s; DJI's RoboMaster boards sample
+/// at 78.6 % at 1 Mbit/s), at the finest quantum among equally close choices, and the
+/// resynchronisation jump width is all of phase 2, for the widest tolerance of clock error
+/// between nodes. At 1 Mbit/s from the G4's 170 MHz: 10 quanta of 17 cycles, sampled at
+/// 80 %, jump width 2 (each node may be 0.78 % off); embassy-stm32's own choice samples at
+/// 90 % with a jump width of 1 (0.39 %).
+///
+/// ```
+/// use rc10_core::can::timing::{bit_timing, BitTiming};
+/// let t = bit_timing(170_000_000, 1_000_000).unwrap();
+/// assert_eq!(t, BitTiming { prescaler: 17, seg1: 7, seg2: 2, sync_jump_width: 2 });
+/// assert_eq!(t.sample_point_permille(), 800);
+/// assert_eq!(t.bitrate_bps(170_000_000), 1_000_000);
+/// ```
+pub fn bit_timing(clock_hz: u32, bitrate_bps: u32) -> Option<BitTiming> {
+    let target_permille: u32 = if bitrate_bps >= 800_000 { 800 } else { 875 };
+    // (distance from the target in per mille · quanta, quanta, timing): compared by
+    // cross-multiplying, so no rounding decides between two quantum counts.
+    let mut best: Option<(u64, u32, BitTiming)> = None;
+    for quanta in MIN_QUANTA..=MAX_QUANTA {
+        let Some(cycles_per_bit) = bitrate_bps.checked_mul(quanta) else {
+            continue;
+        };
+        // A whole number of clock cycles per quantum (none for a zero bitrate).
+        if clock_hz.checked_rem(cycles_per_bit) != Some(0) {
+            continue;
+        }
+        let Some(prescaler) = clock_hz
+            .checked_div(cycles_per_bit)
+            .and_then(|p| u16::try_from(p).ok())
+            .filter(|p| (1..=512).contains(p))
+        else {
+            continue;
+        };
+        // Quanta up to the sample point (sync + seg1), either side of the target.
+        let ideal_milli = quanta.saturating_mul(target_permille); // ≤ 25 · 875
+        let below = (ideal_milli / 1000).max(2);
+        for upto in [below, below.saturating_add(1)] {
+            // seg2 ≥ 1: the sample point is inside the bit.
+            let Some(seg2) = quanta.checked_sub(upto).filter(|&s| s >= 1) else {
+                continue;
+            };
+            let (Ok(seg1), Ok(seg2)) = (u8::try_from(upto.saturating_sub(1)), u8::try_from(seg2))
+            else {
+                continue;
+            };
+            // |upto/quanta − target/1000|, scaled by 1000 · quanta.
+            let distance = u64::from(upto.saturating_mul(1000).abs_diff(ideal_milli));
+            let timing = BitTiming {
+                prescaler,
+                seg1,
+                seg2,
+                sync_jump_width: seg2,
+            };
+            // distance / quanta compared across quantum counts: d₁ · q₂ vs d₂ · q₁.
+            let better = match best {
+                None => true,
+                Some((d, q, _)) => {
+                    let (mine, theirs) = (
+                        distance.saturating_mul(u64::from(q)),
+                        d.saturating_mul(u64::from(quanta)),
+                    );
+                    mine < theirs || (mine == theirs && quanta > q)
+                }
+            };
+            if better {
+                best = Some((distance, quanta, timing));
+            }
+        }
+    }
+    best.map(|(_, _, t)| t)
+}
+
+/// Fewest quanta per bit [`bit_timing`] uses: coarser puts the sample point too far off.
+const MIN_QUANTA: u32 = 8;
+/// Most quanta per bit [`bit_timing`] uses (CAN controllers' usual range ends near 25).
+const MAX_QUANTA: u32 = 25;
+
 /// Time a frame occupies the bus at `bitrate_bps`, in whole microseconds (rounded up).
 pub fn frame_time_us(frame: &CanFrame, bitrate_bps: u32) -> u32 {
     let bits = frame_bits(frame);
@@ -274,6 +400,69 @@ const STUFF: [[u8; 16]; 256] = {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bit_timings_for_the_clocks_robots_use() {
+        let t = |p, s1, s2| BitTiming {
+            prescaler: p,
+            seg1: s1,
+            seg2: s2,
+            sync_jump_width: s2,
+        };
+        // G4 at 170 MHz: 10 quanta of 17 cycles, 8/10 = 80 %.
+        assert_eq!(bit_timing(170_000_000, 1_000_000), Some(t(17, 7, 2)));
+        // 85 MHz = 5 · 17 MHz: only 17 quanta fit; 14/17 = 82.4 % beats 13/17 = 76.5 %.
+        let half = bit_timing(85_000_000, 1_000_000).unwrap();
+        assert_eq!(half, t(5, 13, 3));
+        assert_eq!(half.sample_point_permille(), 823);
+        // 160 MHz: 10 and 20 quanta both sample at exactly 80 %: the finer wins.
+        assert_eq!(bit_timing(160_000_000, 1_000_000), Some(t(8, 15, 4)));
+        // 48 MHz: 24 quanta, 19/24 = 79.2 % (16 quanta give 81.25 %, 12 give 83.3 %).
+        assert_eq!(bit_timing(48_000_000, 1_000_000), Some(t(2, 18, 5)));
+        // RoboMaster C board's 42 MHz CAN clock: 21 quanta, 17/21 = 81.0 %.
+        assert_eq!(bit_timing(42_000_000, 1_000_000), Some(t(2, 16, 4)));
+        // 500 kbit/s aims at 87.5 %: 15/17 = 88.2 % beats 9/10 and 18/20 (90 %).
+        assert_eq!(bit_timing(170_000_000, 500_000), Some(t(20, 14, 2)));
+        // No whole number of 8–25 quanta: 7 MHz / 1 Mbit/s is 7 cycles a bit.
+        assert_eq!(bit_timing(7_000_000, 1_000_000), None);
+        assert_eq!(bit_timing(0, 1_000_000), None);
+        assert_eq!(bit_timing(170_000_000, 0), None);
+        // A prescaler beyond 512: 1 kbit/s from 170 MHz needs 170 000 cycles a bit.
+        assert_eq!(bit_timing(170_000_000, 1_000), None);
+    }
+
+    #[test]
+    fn bit_timing_is_exact_and_its_sample_point_the_closest_there_is() {
+        for clock_mhz in 8..=200u32 {
+            let clock = clock_mhz * 1_000_000;
+            for rate in [125_000u32, 250_000, 500_000, 800_000, 1_000_000] {
+                let target = if rate >= 800_000 { 0.8 } else { 0.875 };
+                // Every exact split, by brute force: the best sample point distance.
+                let mut closest = f64::INFINITY;
+                for q in 8..=25u32 {
+                    if clock % (rate * q) != 0 || clock / (rate * q) > 512 {
+                        continue;
+                    }
+                    for upto in 2..q {
+                        closest = closest.min((f64::from(upto) / f64::from(q) - target).abs());
+                    }
+                }
+                match bit_timing(clock, rate) {
+                    None => assert!(closest.is_infinite(), "{clock} {rate}"),
+                    Some(t) => {
+                        assert_eq!(t.bitrate_bps(clock), rate);
+                        assert_eq!(clock % (u32::from(t.prescaler) * t.quanta_per_bit()), 0);
+                        assert!(t.seg2 >= 1 && t.sync_jump_width == t.seg2);
+                        let sp = f64::from(1 + u32::from(t.seg1)) / f64::from(t.quanta_per_bit());
+                        assert!(
+                            (sp - target).abs() <= closest + 1e-12,
+                            "{clock} {rate} {t:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
     use embedded_can::{ExtendedId, StandardId};
     use proptest::prelude::*;
 
