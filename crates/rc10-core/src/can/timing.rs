@@ -151,7 +151,8 @@ impl BitTiming {
 ///
 /// The sample point is put nearest 80 % from 800 kbit/s up and 87.5 % below (CiA 301
 /// recommends 75 % at 1 Mbit/s and 87.5 % up to 500 kbit/s; DJI's RoboMaster boards sample
-/// at 78.6 % at 1 Mbit/s), at the finest quantum among equally close choices, and the
+/// at 78.6 % at 1 Mbit/s), at the finest quantum among equally close choices (and the
+/// earlier of two equally close sample points, for the longer phase 2), and the
 /// resynchronisation jump width is all of phase 2, for the widest tolerance of clock error
 /// between nodes. At 1 Mbit/s from the G4's 170 MHz: 10 quanta of 17 cycles, sampled at
 /// 80 %, jump width 2 (each node may be 0.78 % off); embassy-stm32's own choice samples at
@@ -423,6 +424,10 @@ mod tests {
         assert_eq!(bit_timing(42_000_000, 1_000_000), Some(t(2, 16, 4)));
         // 500 kbit/s aims at 87.5 %: 15/17 = 88.2 % beats 9/10 and 18/20 (90 %).
         assert_eq!(bit_timing(170_000_000, 500_000), Some(t(20, 14, 2)));
+        // 10 MHz at 500 kbit/s: 10 quanta (9/10 = 90 %) and 20 (17/20 = 85 % or 18/20 =
+        // 90 %) all miss 87.5 % by 2.5 %: the finer quantum, and of its two the earlier
+        // sample point, which leaves the longer phase 2 and jump width.
+        assert_eq!(bit_timing(10_000_000, 500_000), Some(t(1, 16, 3)));
         // No whole number of 8–25 quanta: 7 MHz / 1 Mbit/s is 7 cycles a bit.
         assert_eq!(bit_timing(7_000_000, 1_000_000), None);
         assert_eq!(bit_timing(0, 1_000_000), None);
