@@ -6,10 +6,11 @@
 //!
 //! Invariants: no panic; the motor claims exactly frames with its feedback ID (0x200 + id,
 //! GM6020 0x204 + id, standard); it accepts exactly DLC-8 data frames with an angle below
-//! 8192, and then reports what the frame says (rotor rpm through the gear ratio, torque
-//! current on the ESC's scale, temperature except on the C610, the absolute angle of a
-//! GM6020); a rejected frame changes nothing; reported values are finite, angles in
-//! [0, 360); the packed slot is within the ESC's range and zero while offline.
+//! 8192 not stamped before the newest frame it took, and then reports what the frame says
+//! (rotor rpm through the gear ratio, torque current on the ESC's scale, temperature except
+//! on the C610, the absolute angle of a GM6020); a rejected frame changes nothing; reported
+//! values are finite, angles in [0, 360); the packed slot is within the ESC's range and zero
+//! while offline.
 #![no_main]
 
 use arbitrary::{Arbitrary, Unstructured};
@@ -17,7 +18,7 @@ use libfuzzer_sys::fuzz_target;
 use rc10_core::can::{CanFrame, ExtendedId, Id, StandardId};
 use rc10_core::motor::Motor;
 use rc10_core::motor::dji::{DjiConfig, DjiModel, DjiMotor};
-use rc10_core::node::{CanNode, TxBatch};
+use rc10_core::node::{CanNode, FrameError, TxBatch};
 use rc10_core::time::Instant;
 use rc10_fuzz::input::{Payload, f32_from};
 use rc10_fuzz::proto;
@@ -127,6 +128,15 @@ fn feed(
         assert_eq!(before, after, "rejected {frame:?} changed the state");
         return;
     };
+    // A frame stamped before the newest feedback the motor took is older than its state.
+    if before
+        .last_feedback
+        .is_some_and(|newest| Instant::from_ticks(stamp) < newest)
+    {
+        assert_eq!(result, Err(FrameError::OutOfOrder), "{frame:?} at {stamp}");
+        assert_eq!(before, after, "an out-of-order {frame:?} changed the state");
+        return;
+    }
     assert!(result.is_ok(), "valid {frame:?} rejected: {result:?}");
     let speed = f64::from(f.rpm) / gear;
     assert!(

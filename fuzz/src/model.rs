@@ -40,8 +40,12 @@ pub const START_US: u64 = 1_000_000;
 /// Per-motor bookkeeping of what the application and the bus did to it.
 #[derive(Debug, Clone)]
 struct Track {
-    /// The stamp of the last accepted feedback frame (one that keeps the motor online) since
-    /// the last tick.
+    /// The newest feedback stamp the motor took (frames stamped before it do not move it
+    /// back), clamped to each tick's time when it is later, as the motor's liveness check
+    /// does. A DJI motor refuses a frame stamped before it.
+    newest: Option<u64>,
+    /// Whether feedback that keeps the motor online was accepted since the last tick: then
+    /// the motor's last feedback time is `newest`.
     fresh: Option<u64>,
     /// The time of the first tick after the last accepted feedback: from then on the motor's
     /// last feedback time is at most this.
@@ -62,6 +66,7 @@ struct Track {
 
 impl Track {
     const NEW: Self = Self {
+        newest: None,
         fresh: None,
         silent_since: None,
         user_limit: f32::INFINITY,
@@ -211,7 +216,10 @@ impl<'a> Harness<'a> {
         let Some(i) = owner else { return };
         let keeps_online = match self.motors[i] {
             MotorRef::Dji(..) => {
-                let valid = proto::dji_feedback(frame).is_some_and(|f| f.angle < proto::DJI_COUNTS);
+                // Well formed, and not stamped before the newest feedback taken.
+                let in_order = self.track[i].newest.is_none_or(|n| stamp >= n);
+                let valid = in_order
+                    && proto::dji_feedback(frame).is_some_and(|f| f.angle < proto::DJI_COUNTS);
                 assert_eq!(
                     accepted, valid,
                     "DJI feedback {frame:?}: accepted {accepted}"
@@ -240,7 +248,10 @@ impl<'a> Harness<'a> {
             }
         };
         if keeps_online {
-            self.track[i].fresh = Some(stamp);
+            let t = &mut self.track[i];
+            let newest = t.newest.map_or(stamp, |n| n.max(stamp));
+            t.newest = Some(newest);
+            t.fresh = Some(newest);
         }
         check_state(&self.motors[i].motor().state(), i);
     }
@@ -443,6 +454,10 @@ impl<'a> Harness<'a> {
     fn check_liveness(&mut self, i: usize, state: &MotorState, now: u64) {
         let timeout = self.motors[i].timeout_us();
         let t = &mut self.track[i];
+        // The liveness check counts a stamp after the tick as the tick's time, and keeps it so.
+        if t.newest.is_some_and(|n| n >= now) {
+            t.newest = Some(now);
+        }
         if let Some(stamp) = t.fresh.take() {
             // Latest accepted feedback since the last tick: online exactly when it is within
             // the timeout (a stamp after `now` counts as now).

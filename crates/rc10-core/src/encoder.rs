@@ -397,12 +397,8 @@ impl Encoder {
     /// `counts_per_period` is the rotor's mean speed over the interval in counts per period;
     /// `gap_periods` the interval measured from the timestamps, in periods. The true interval
     /// is a whole number `m ≥ 1` of periods (the frames in between were lost); it is searched
-    /// within ±2 of the measured gap (1 to 3 below a gap of 1.5), and the step
-    /// `d + k · counts_per_rev` that a whole `m` explains best is taken: the rotor position,
-    /// not the late timestamp, decides. A measured gap below half a period may also be
-    /// `m = 0`, a copy of the last frame (CAN delivers a frame twice when an error hits its
-    /// last bit, a frame time later): a copy is a step of 0, however fast the rotor turns,
-    /// where at M2006 speeds three periods would explain it nearly as well. Where two
+    /// within ±2 of the measured gap, and the step `d + k · counts_per_rev` that a whole `m`
+    /// explains best is taken: the rotor position, not the late timestamp, decides. Where two
     /// intervals explain the reading equally well (the rotor turns a whole number of times in
     /// the difference: 2048 counts per period for `Δm` = 4, beyond 4096 for smaller ones), the
     /// one nearer the measured gap wins. At low speed, where no choice in the window changes
@@ -435,8 +431,6 @@ impl Encoder {
             return Err(EncoderError::OutOfRange { raw });
         }
         let nf = f32::from(cpr);
-        // Below half a period the frame may be a copy (m = 0); NaN was refused above.
-        let copy_possible = gap_periods < 0.5;
         let gap = gap_periods.clamp(1.0, 1.0e6);
         // At most ±2 periods around the measured gap: the whole window moves the rotor by less
         // than a quarter turn, so every candidate gives the same turn count.
@@ -449,14 +443,7 @@ impl Encoder {
             clippy::arithmetic_side_effects,
             reason = "centre is within [1, 10^6]: gap is clamped"
         )]
-        let (first, last_m) = (
-            if copy_possible {
-                0
-            } else {
-                (centre - 2).max(1)
-            },
-            centre + 2,
-        );
+        let (first, last_m) = ((centre - 2).max(1), centre + 2);
         // The turn count each candidate gives is monotonic in `m` (every operation of
         // `step_for` is): when the outermost two agree, every candidate gives the same step
         // and the search below could only return it.
@@ -764,26 +751,6 @@ mod tests {
             .collect();
         let (counted, truth) = run_late_reads(GearRatio::M3508, 100.0, &late);
         assert_eq!(counted, truth);
-    }
-
-    #[test]
-    fn a_copy_of_the_last_frame_is_no_step_however_fast() {
-        // M2006 at full speed: 2457.6 counts per 1 ms period.
-        let mut enc = dji(GearRatio::M2006);
-        enc.update(0).unwrap();
-        enc.update_periodic(2458, 2457.6, 1.0).unwrap();
-        // The same reading 0.13 periods later: a copy, not 8192 counts in 3 periods
-        // (7372.8 predicted, 819 off).
-        enc.update_periodic(2458, 2457.6, 0.13).unwrap();
-        assert_eq!(enc.total_counts(), 2458);
-        // Two frames read together (0.05 periods apart by their stamps) that are really a
-        // period apart: the step fits one period exactly, not a copy.
-        enc.update_periodic(4916, 2457.6, 0.05).unwrap();
-        assert_eq!(enc.total_counts(), 4916);
-        // At a measured gap of half a period or more, a copy is not considered: the same
-        // reading is then three periods of travel (the nearest whole turn to 7372.8).
-        enc.update_periodic(4916, 2457.6, 0.5).unwrap();
-        assert_eq!(enc.total_counts(), 4916 + 8192);
     }
 
     #[test]

@@ -249,6 +249,9 @@ pub enum FrameError {
     OutOfRange,
     /// The frame is of a kind this node does not parse (e.g. an unknown VESC status packet).
     Unsupported,
+    /// The frame is stamped before the newest one the node took: it is older than the
+    /// node's state (a transport that stamps frames itself delivered it late).
+    OutOfOrder,
 }
 
 impl fmt::Display for FrameError {
@@ -257,6 +260,7 @@ impl fmt::Display for FrameError {
             Self::WrongLength { dlc } => write!(f, "feedback frame has wrong length {dlc}"),
             Self::OutOfRange => f.write_str("feedback field out of range"),
             Self::Unsupported => f.write_str("feedback frame kind not supported"),
+            Self::OutOfOrder => f.write_str("feedback frame older than the last one taken"),
         }
     }
 }

@@ -116,6 +116,7 @@ fn can_errors_and_ids_read_as_on_an_analyser() {
     says(FrameError::WrongLength { dlc: 6 }, &["length 6"]);
     says(FrameError::OutOfRange, &["out of range"]);
     says(FrameError::Unsupported, &["not supported"]);
+    says(FrameError::OutOfOrder, &["older"]);
 }
 
 #[test]

@@ -631,6 +631,16 @@ impl DjiMotor {
         if raw_angle >= DJI_COUNTS_PER_REV {
             return Err(FrameError::OutOfRange);
         }
+        // A frame stamped before the newest one taken (a transport that stamps frames itself
+        // and hands one over late) is older than the state: unwrapping it against the newer
+        // reading could count a turn. (A far-future stamp is clamped to the tick's time at
+        // the next tick, so it holds frames back for at most a tick.)
+        if s.liveness
+            .last_feedback()
+            .is_some_and(|newest| now < newest)
+        {
+            return Err(FrameError::OutOfOrder);
+        }
         if s.awaiting_return {
             if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
                 s.encoder.reset();
@@ -640,15 +650,20 @@ impl DjiMotor {
             s.encoder
                 .update(raw_angle)
                 .map_err(|_| FrameError::OutOfRange)?;
+        } else if s.encoder.raw() == Some(raw_angle) && s.rotor_rpm == rotor_rpm {
+            // The same angle and speed as the last frame: a copy (CAN repeats a frame when an
+            // error hits its last bit), whenever it was read. No step: a rotor that turns
+            // moves within a period at any DJI speed, and unwrapping a copy against a fast
+            // speed could count a turn (three M2006 periods at 17 000 rotor rpm are 0.85 of
+            // one).
         } else {
             // Multi-turn counting that survives lost frames at full speed: the ESC sends every
             // 1 ms, so the frames were a whole number of periods apart; the mean reported rotor
             // speed says how far the rotor went in each candidate interval, and the encoder
             // takes the one the reading fits (see `Encoder::update_periodic`). The timestamps
             // only centre the search, as they may be read late. A stamp more than two periods
-            // after the last tick is not trusted at all (a bogus or far-future stamp), nor one
-            // before the last frame's: the interval is then taken as one period. Under half a
-            // period (the same stamp included) the frame may be a copy of the last one.
+            // after the last tick is not trusted at all (a bogus or far-future stamp): the
+            // interval is then taken as one period.
             let trusted = s
                 .last_tick
                 .is_none_or(|tick| now.saturating_duration_since(tick) <= TRUST_AHEAD);

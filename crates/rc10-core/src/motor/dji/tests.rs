@@ -824,58 +824,65 @@ fn a_far_future_stamp_does_not_corrupt_the_total_angle() {
 #[test]
 fn a_frame_delivered_twice_does_not_add_a_turn() {
     // M2006 at 17 000 rotor rpm (472 rpm at the output, below its 500 rpm no-load speed):
-    // 2321.07 counts per 1 ms frame. Every frame comes twice, the copy a frame time
-    // (0.13 ms) later: CAN repeats a frame whose last bit met an error. A copy is a step of
-    // 0; three periods (6963 counts, 1229 from a whole turn) explain it almost as well.
-    let m = DjiMotor::m2006(1).unwrap();
-    let counts_per_ms = 17_000.0f64 / 60.0 * 8192.0 / 1000.0;
-    for k in 1..=50u64 {
-        let now = T0 + Duration::from_millis(k);
-        tick(&m, now);
-        let raw = ((counts_per_ms * k as f64).round() as i64).rem_euclid(8192) as u16;
-        let frame = fb(0x201, raw, 17_000, 0, 0);
-        m.update_feedback(&frame, now).unwrap();
-        m.update_feedback(&frame, now + Duration::from_micros(130))
-            .unwrap();
+    // 2321.07 counts per 1 ms frame. Every frame comes twice (CAN repeats a frame whose last
+    // bit met an error), the copy read 0.13 ms later, or 0.6 ms later behind a busy
+    // receiver. A copy is a step of 0; three periods (6963 counts, 0.85 of a turn) would
+    // explain it almost as well as one.
+    for copy_after_us in [130, 600] {
+        let m = DjiMotor::m2006(1).unwrap();
+        let counts_per_ms = 17_000.0f64 / 60.0 * 8192.0 / 1000.0;
+        for k in 1..=50u64 {
+            let now = T0 + Duration::from_millis(k);
+            tick(&m, now);
+            let raw = ((counts_per_ms * k as f64).round() as i64).rem_euclid(8192) as u16;
+            let frame = fb(0x201, raw, 17_000, 0, 0);
+            m.update_feedback(&frame, now).unwrap();
+            m.update_feedback(&frame, now + Duration::from_micros(copy_after_us))
+                .unwrap();
+        }
+        // 49 frames' worth of travel after the first, at 36:1.
+        let first = counts_per_ms.round() as i64;
+        let true_counts = (counts_per_ms * 50.0).round() as i64;
+        let expect_deg = (true_counts - first) as f64 * 360.0 / (8192.0 * 36.0);
+        let got = f64::from(m.total_angle_deg().unwrap());
+        assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
     }
-    // 49 frames' worth of travel after the first, at 36:1.
-    let first = counts_per_ms.round() as i64;
-    let true_counts = (counts_per_ms * 50.0).round() as i64;
-    let expect_deg = (true_counts - first) as f64 * 360.0 / (8192.0 * 36.0);
-    let got = f64::from(m.total_angle_deg().unwrap());
-    assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
 }
 
 #[test]
-fn a_frame_stamped_before_the_last_one_does_not_stretch_the_next_interval() {
-    // M3508 at full speed (9256 rotor rpm, 1263.7 counts a frame). One frame carries a stamp
-    // 51 ms old (a transport that stamps frames itself); the next frame's interval is still
-    // measured from the newest stamp, the frame before's (2 ms), not from the old one
-    // (52 ms, which moved the count by 8 turns).
+fn a_frame_older_than_the_last_one_taken_is_rejected_and_changes_nothing() {
+    // M3508 at full speed (9256 rotor rpm, 1263.7 counts a frame). After each fresh frame, a
+    // transport that stamps frames itself hands over an old one (2 to 10 ms old, with its
+    // old contents and stamp): unwrapped against the newer reading it could count a turn.
+    // Rejected, it changes nothing, and counting goes on exactly.
     let m = DjiMotor::m3508(1).unwrap();
     let counts_per_ms = 9_256.0f64 / 60.0 * 8192.0 / 1000.0;
+    let frame_at = |k: u64| {
+        let counts = (counts_per_ms * k as f64).round() as i64;
+        fb(0x201, counts.rem_euclid(8192) as u16, 9256, 0, 30)
+    };
     for k in 1..=100u64 {
         let now = T0 + Duration::from_millis(k);
         tick(&m, now);
-        let true_counts = (counts_per_ms * k as f64).round() as i64;
-        let stamp = if k == 60 {
-            now - Duration::from_millis(51)
-        } else {
-            now
-        };
-        m.update_feedback(
-            &fb(0x201, true_counts.rem_euclid(8192) as u16, 9256, 0, 30),
-            stamp,
-        )
-        .unwrap();
-        // Online from the tick after the first frame, throughout.
-        assert!(k == 1 || m.is_online());
+        m.update_feedback(&frame_at(k), now).unwrap();
+        if k > 10 {
+            let age = 2 + k % 9;
+            let before = m.state();
+            assert_eq!(
+                m.update_feedback(&frame_at(k - age), now - Duration::from_millis(age)),
+                Err(FrameError::OutOfOrder)
+            );
+            assert_eq!(m.state(), before);
+        }
     }
     let first = counts_per_ms.round() as i64;
     let true_counts = (counts_per_ms * 100.0).round() as i64;
     let expect_deg = (true_counts - first) as f64 * 360.0 * 187.0 / (8192.0 * 3591.0);
     let got = f64::from(m.total_angle_deg().unwrap());
     assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
+    // The same stamp as the newest is not older: a copy read at once is taken (as no step).
+    let now = T0 + Duration::from_millis(100);
+    assert_eq!(m.update_feedback(&frame_at(100), now), Ok(()));
 }
 
 #[test]
