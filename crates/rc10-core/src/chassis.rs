@@ -298,7 +298,9 @@ impl LinearChassis<4> {
     /// `vx − ω·yᵢ + sᵢ·(vy + ω·xᵢ)`: for O rollers `s = (−1, +1, +1, −1)`, which gives the
     /// familiar rows, with `k = a + b` (`a`, `b` half the wheelbase and track):
     /// FL `vx − vy − k·ω`, FR `vx + vy + k·ω`, RL `vx + vy − k·ω`, RR `vx − vy + k·ω`.
-    /// X rollers give `k = a − b` instead (see [`MecanumRollers::X`]).
+    /// X rollers flip every roller sign, `s = (+1, −1, −1, +1)`: FL `vx + vy + k·ω`,
+    /// FR `vx − vy − k·ω`, RL `vx − vy + k·ω`, RR `vx + vy − k·ω` with `k = a − b` (see
+    /// [`MecanumRollers::X`]).
     pub fn mecanum(config: MecanumConfig) -> Result<Self, ChassisError> {
         let a = positive(config.wheelbase_m)? / 2.0;
         let b = positive(config.track_m)? / 2.0;
@@ -668,13 +670,13 @@ impl Odometry {
     }
 
     /// Advances `dt_s` seconds with the robot-frame `twist` (its `omega_rad_s` unused), to
-    /// the heading `yaw_rad` a gyro reads at the end of the step (any zero and any wrap, but
-    /// counter-clockwise positive seen from above, as the pose's heading is: negate a
-    /// clockwise-positive (NED) yaw. Only its change counts, the shorter way round, and the
-    /// pose's heading follows the gyro's
-    /// changes from the heading the pose had; the first call has no change to go by and moves
-    /// without turning). Call it often enough that the gyro turns less than half a turn
-    /// between calls: a change of π or more is taken the other way round. Returns `false`,
+    /// the heading `yaw_rad` a gyro reads at the end of the step. The gyro may have any zero
+    /// and any wrap, but must be counter-clockwise positive seen from above, as the pose's
+    /// heading is: negate a clockwise-positive (NED) yaw. Only its change counts, the shorter
+    /// way round, and the pose's heading follows the gyro's changes from the heading the pose
+    /// had; the first call has no change to go by and moves without turning. Call it often
+    /// enough that the gyro turns less than half a turn between calls: a change of π or more
+    /// is taken the other way round. Returns `false`,
     /// and changes nothing, for a non-finite twist or yaw, a `dt_s` that is not finite and
     /// positive, or a step that overflows.
     pub fn update_with_yaw(&mut self, twist: Twist, yaw_rad: f32, dt_s: f32) -> bool {

@@ -50,16 +50,17 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 250_000;
 /// 250–300 ms after it (with [`WATCHDOG_TIMEOUT_US`]); a fault or panic that stops the core
 /// stops the feeding at once, and the reset comes 200–250 ms after it (the last feed was up
 /// to a look earlier). Nominal figures: the IWDG counts the LSI, 32 kHz nominal and
-/// 29.5–34 kHz over temperature on the G4, so the 250 ms timeout is 235–271 ms. With a debugger attached, a panic (panic-probe: a HardFault) halts the
-/// core for the backtrace, and the frozen IWDG (below) does not reset it.
+/// 29.5–34 kHz over temperature on the G4, so the 250 ms timeout is 235–271 ms. With a
+/// debugger attached, a panic (panic-probe: a HardFault) halts the core for the backtrace,
+/// and the frozen IWDG (below) does not reset it.
 ///
 /// Spawn it on the thread-mode executor after the schedulers (a bus whose scheduler starts
 /// more than a look later counts as stopped), with the watchdog made from `p.IWDG` and a
 /// timeout of several looks ([`WATCHDOG_TIMEOUT_US`]). Blocking work in thread mode longer
 /// than the timeout less a look (200 ms; 185 ms on a fast LSI) resets the board (a flash
-/// erase, a busy-wait calibration): do it before spawning this task. A `tick_period` longer than a look never feeds it. The
-/// task also freezes the IWDG while a debugger halts the core (DBGMCU), so breakpoints do
-/// not reset the board.
+/// erase, a busy-wait calibration): do it before spawning this task. A `tick_period` longer
+/// than a look never feeds it. The task also freezes the IWDG while a debugger halts the
+/// core (DBGMCU), so breakpoints do not reset the board.
 #[embassy_executor::task]
 pub async fn watchdog_task(
     mut watchdog: IndependentWatchdog<'static, IWDG>,

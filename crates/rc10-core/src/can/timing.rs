@@ -110,11 +110,13 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct BitTiming {
-    /// Clock cycles per time quantum, 1–512.
+    /// Clock cycles per time quantum, 1–511 from [`bit_timing`] (the FDCAN takes 512, which
+    /// embassy-stm32 0.6 cannot write).
     pub prescaler: u16,
-    /// Quanta before the sample point, after the sync quantum, 1–255.
+    /// Quanta before the sample point, after the sync quantum, 2–255.
     pub seg1: u8,
-    /// Quanta after the sample point, 1–128.
+    /// Quanta after the sample point, 2–128 (the controller needs 2 to process the sampled
+    /// bit).
     pub seg2: u8,
     /// Resynchronisation jump width in quanta, 1–128, at most `seg2`.
     pub sync_jump_width: u8,
@@ -147,7 +149,7 @@ impl BitTiming {
 }
 
 /// The nominal bit timing for `bitrate_bps` from a `clock_hz` CAN clock, exact (no bitrate
-/// error), or `None` when no prescaler gives 8–25 quanta per bit exactly.
+/// error), or `None` when no prescaler up to 511 gives 8–25 quanta per bit exactly.
 ///
 /// The sample point is put nearest 80 % from 800 kbit/s up and 87.5 % below (CiA 301
 /// recommends 75 % at 1 Mbit/s and 87.5 % up to 500 kbit/s; DJI's RoboMaster boards sample
@@ -181,16 +183,19 @@ pub fn bit_timing(clock_hz: u32, bitrate_bps: u32) -> Option<BitTiming> {
         let Some(prescaler) = clock_hz
             .checked_div(cycles_per_bit)
             .and_then(|p| u16::try_from(p).ok())
-            .filter(|p| (1..=512).contains(p))
+            .filter(|p| (1..=511).contains(p))
         else {
             continue;
         };
-        // Quanta up to the sample point (sync + seg1), either side of the target.
+        // Quanta up to the sample point (sync + seg1), either side of the target, but at
+        // least 3 (seg1 ≥ 2) and leaving seg2 ≥ 2 (the distance only grows further out, so
+        // the nearest allowed count is the best one).
         let ideal_milli = quanta.saturating_mul(target_permille); // ≤ 25 · 875
-        let below = (ideal_milli / 1000).max(2);
-        for upto in [below, below.saturating_add(1)] {
-            // seg2 ≥ 1: the sample point is inside the bit.
-            let Some(seg2) = quanta.checked_sub(upto).filter(|&s| s >= 1) else {
+        let last = quanta.saturating_sub(2);
+        let below = (ideal_milli / 1000).max(3).min(last);
+        for upto in [below, below.saturating_add(1).min(last)] {
+            // seg2 ≥ 2: the controller's information processing time after the sample point.
+            let Some(seg2) = quanta.checked_sub(upto).filter(|&s| s >= 2) else {
                 continue;
             };
             let (Ok(seg1), Ok(seg2)) = (u8::try_from(upto.saturating_sub(1)), u8::try_from(seg2))
@@ -428,12 +433,19 @@ mod tests {
         // 90 %) all miss 87.5 % by 2.5 %: the finer quantum, and of its two the earlier
         // sample point, which leaves the longer phase 2 and jump width.
         assert_eq!(bit_timing(10_000_000, 500_000), Some(t(1, 16, 3)));
+        // 20 MHz at 500 kbit/s: 7/8 = 87.5 % exactly would leave a phase 2 of one quantum,
+        // too short for the controller; 17/20 (85 %, phase 2 of 3) instead.
+        assert_eq!(bit_timing(20_000_000, 500_000), Some(t(2, 16, 3)));
+        // 250 kbit/s from 170 MHz: 8 quanta at 87.5 % the same; 15/17 = 88.2 %.
+        assert_eq!(bit_timing(170_000_000, 250_000), Some(t(40, 14, 2)));
         // No whole number of 8–25 quanta: 7 MHz / 1 Mbit/s is 7 cycles a bit.
         assert_eq!(bit_timing(7_000_000, 1_000_000), None);
         assert_eq!(bit_timing(0, 1_000_000), None);
         assert_eq!(bit_timing(170_000_000, 0), None);
-        // A prescaler beyond 512: 1 kbit/s from 170 MHz needs 170 000 cycles a bit.
+        // A prescaler beyond 511: 1 kbit/s from 170 MHz needs 170 000 cycles a bit; at
+        // 10 kbit/s from 40.96 MHz, 16 quanta would need exactly 256 (taken).
         assert_eq!(bit_timing(170_000_000, 1_000), None);
+        assert_eq!(bit_timing(40_960_000, 10_000), Some(t(256, 13, 2)));
     }
 
     #[test]
@@ -445,10 +457,10 @@ mod tests {
                 // Every exact split, by brute force: the best sample point distance.
                 let mut closest = f64::INFINITY;
                 for q in 8..=25u32 {
-                    if clock % (rate * q) != 0 || clock / (rate * q) > 512 {
+                    if clock % (rate * q) != 0 || clock / (rate * q) > 511 {
                         continue;
                     }
-                    for upto in 2..q {
+                    for upto in 2..=q - 2 {
                         closest = closest.min((f64::from(upto) / f64::from(q) - target).abs());
                     }
                 }
@@ -457,7 +469,7 @@ mod tests {
                     Some(t) => {
                         assert_eq!(t.bitrate_bps(clock), rate);
                         assert_eq!(clock % (u32::from(t.prescaler) * t.quanta_per_bit()), 0);
-                        assert!(t.seg2 >= 1 && t.sync_jump_width == t.seg2);
+                        assert!(t.seg1 >= 2 && t.seg2 >= 2 && t.sync_jump_width == t.seg2);
                         let sp = f64::from(1 + u32::from(t.seg1)) / f64::from(t.quanta_per_bit());
                         assert!(
                             (sp - target).abs() <= closest + 1e-12,
