@@ -187,11 +187,14 @@ fn main() -> ! {
         let _ = builder.register(m);
     }
     let bus = builder.build();
+    // Stamps after every frame the tick benches gave these motors (a motor refuses a frame
+    // stamped before the newest one it took).
+    const T0_US: u64 = 10_000_000;
     let mut k = 0u32;
     let dispatch_samples = |k: &mut u32, out: &mut [u32; SAMPLES]| {
         for slot in out.iter_mut() {
             let frame = feedback(4, *k);
-            let now = Instant::from_micros(1_000_000 + u64::from(*k) * 1000);
+            let now = Instant::from_micros(T0_US + u64::from(*k) * 1000);
             *slot = f
                 .cal
                 .instructions(ticks(|| bus.dispatch(black_box(&frame), now)));
@@ -208,7 +211,7 @@ fn main() -> ! {
         if let Some(frame) = CanFrame::standard(0x204, &[a[0], a[1], r[0], r[1], 0, 0, 35, 0]) {
             bus.dispatch(
                 &frame,
-                Instant::from_micros(2_000_000 + u64::from(n) * 1000),
+                Instant::from_micros(T0_US + 1_500_000 + u64::from(n) * 1000),
             );
         }
     }
@@ -223,7 +226,7 @@ fn main() -> ! {
         let r = (9256i16 - (k % 7) as i16).to_be_bytes();
         let frame = CanFrame::standard(0x204, &[a[0], a[1], r[0], r[1], 0, 0, 35, 0])
             .unwrap_or_else(|| unreachable!());
-        let now = Instant::from_micros(1_000_000 + u64::from(k) * 1000);
+        let now = Instant::from_micros(T0_US + u64::from(k) * 1000);
         k += 1;
         *slot = f
             .cal

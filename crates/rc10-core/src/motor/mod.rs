@@ -363,6 +363,12 @@ impl Liveness {
         }
     }
 
+    /// [`record_feedback`](Self::record_feedback) for a driver that has refused frames
+    /// stamped before the last one (so `now` is not before it): one store on the 1 kHz path.
+    pub(crate) fn record_feedback_in_order(&mut self, now: Instant) {
+        self.last_feedback = Some(now);
+    }
+
     /// Re-evaluates at `now` under `health`; returns `true` exactly when the motor has just
     /// gone offline (so the driver can zero its command and reset its loops once).
     ///

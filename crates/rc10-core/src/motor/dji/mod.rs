@@ -289,6 +289,9 @@ struct DjiState {
     cascade: Cascade,
     encoder: Encoder,
     rotor_rpm: i16,
+    /// The last accepted frame's 8 data bytes; all ones (an angle of 0xFFFF, which no valid
+    /// frame has) before the first and after going offline.
+    last_data: u64,
     speed_rpm: f32,
     current_amps: Option<f32>,
     temperature_c: Option<f32>,
@@ -440,6 +443,7 @@ impl DjiMotor {
                 cascade,
                 encoder,
                 rotor_rpm: 0,
+                last_data: u64::MAX,
                 speed_rpm: 0.0,
                 current_amps: None,
                 temperature_c: None,
@@ -635,12 +639,24 @@ impl DjiMotor {
         // and hands one over late) is older than the state: unwrapping it against the newer
         // reading could count a turn. (A far-future stamp is clamped to the tick's time at
         // the next tick, so it holds frames back for at most a tick.)
-        if s.liveness
-            .last_feedback()
-            .is_some_and(|newest| now < newest)
-        {
-            return Err(FrameError::OutOfOrder);
+        let since_newest = match s.liveness.last_feedback() {
+            Some(newest) => match now.checked_duration_since(newest) {
+                Some(since) => Some(since),
+                None => return Err(FrameError::OutOfOrder),
+            },
+            None => None,
+        };
+        // The same 8 bytes as the last frame: a copy (CAN repeats a frame when an error hits
+        // its last bit), whenever it was read, or a motor at rest reporting the same again.
+        // Nothing changes but the time. Unwrapping a copy at speed could count a turn: three
+        // M2006 periods at 17 000 rotor rpm are 0.85 of one. (Going offline forgets the last
+        // frame, so that after an outage the return policy applies first.)
+        let data = u64::from_ne_bytes(*d);
+        if data == s.last_data {
+            s.liveness.record_feedback_in_order(now);
+            return Ok(());
         }
+        s.last_data = data;
         if s.awaiting_return {
             if self.config.health.on_return == super::MultiTurnOnReturn::Restart {
                 s.encoder.reset();
@@ -650,12 +666,6 @@ impl DjiMotor {
             s.encoder
                 .update(raw_angle)
                 .map_err(|_| FrameError::OutOfRange)?;
-        } else if s.encoder.raw() == Some(raw_angle) && s.rotor_rpm == rotor_rpm {
-            // The same angle and speed as the last frame: a copy (CAN repeats a frame when an
-            // error hits its last bit), whenever it was read. No step: a rotor that turns
-            // moves within a period at any DJI speed, and unwrapping a copy against a fast
-            // speed could count a turn (three M2006 periods at 17 000 rotor rpm are 0.85 of
-            // one).
         } else {
             // Multi-turn counting that survives lost frames at full speed: the ESC sends every
             // 1 ms, so the frames were a whole number of periods apart; the mean reported rotor
@@ -667,10 +677,9 @@ impl DjiMotor {
             let trusted = s
                 .last_tick
                 .is_none_or(|tick| now.saturating_duration_since(tick) <= TRUST_AHEAD);
-            let gap_periods = match s.liveness.last_feedback() {
-                Some(prev) if trusted && now >= prev => {
+            let gap_periods = match since_newest {
+                Some(gap) if trusted => {
                     // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
-                    let gap = now.saturating_duration_since(prev);
                     u32::try_from(gap.as_micros()).unwrap_or(u32::MAX) as f32
                         * (1.0 / FEEDBACK_PERIOD_US as f32)
                 }
@@ -704,7 +713,7 @@ impl DjiMotor {
                 s.limit = limit_in_force(self.limit, s.derate, s.user_limit);
             }
         }
-        s.liveness.record_feedback(now);
+        s.liveness.record_feedback_in_order(now);
         Ok(())
     }
 }
@@ -740,6 +749,7 @@ impl CanNode for DjiMotor {
             }
             if s.liveness.check(health, now) {
                 s.awaiting_return = true;
+                s.last_data = u64::MAX;
                 s.cascade.reset();
             }
             if !s.liveness.is_online() {
