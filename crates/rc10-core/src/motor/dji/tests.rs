@@ -364,6 +364,15 @@ fn multi_turn_restart_policy_restarts_total_angle() {
     let back = T0 + Duration::from_millis(300);
     m.update_feedback(&fb(0x201, 7000, 0, 0, 0), back).unwrap();
     assert_eq!(m.total_angle_deg(), Some(0.0));
+    // Back with the very frame it sent before the outage (it did not move while off): not
+    // taken as a copy of that frame, the return policy applies and the count restarts.
+    let m = DjiMotor::new(DjiModel::M2006, 1, cfg).unwrap();
+    m.update_feedback(&fb(0x201, 0, 0, 0, 0), T0).unwrap();
+    m.update_feedback(&fb(0x201, 4000, 0, 0, 0), T0).unwrap();
+    tick(&m, T0);
+    tick(&m, T0 + Duration::from_millis(150)); // offline
+    m.update_feedback(&fb(0x201, 4000, 0, 0, 0), back).unwrap();
+    assert_eq!(m.total_angle_deg(), Some(0.0));
 }
 
 #[test]
