@@ -4,7 +4,18 @@
 //!
 //! The step follows `PID_Incremental::pid_calc` in RC10_LIB's `APP/Src/APP_PID.cpp` as of the
 //! commit that introduced these gains (`User/debug/Src/frame_demo.cpp`), which later versions
-//! keep; see [`LegacyPid`] for what that means for the loop.
+//! keep. It differs from rc10's own [`IncrementalPid`](rc10_core::pid::IncrementalPid) on
+//! purpose. RC10_LIB's:
+//! - outputs 0 on its first call, and takes that call's error as the previous one: the
+//!   proportional term only ever adds the error's *changes*, so a step is not met by a kick
+//!   of kp·e but by the integral alone (the built-in speed steps therefore hold 0 rpm before
+//!   they step, so that the loop meets the step already running);
+//! - sets an error inside the deadband to 0 and still applies the increments: entering the
+//!   band steps the output back by kp times the last error, and leaving it steps it up by kp
+//!   times the new one (rc10 leaves the output and the history alone inside the band);
+//! - adds `ki · e` and `kd · (e − 2e₁ + e₂)` per call, with no `dt`: each call is one tick,
+//!   however much time passed (its `dt` only feeds the differentiator, off here);
+//! - clamps the output, and carries the clamped output into the next call.
 
 use rc10_core::can::CanFrame;
 use rc10_core::encoder::GearRatio;
@@ -54,17 +65,7 @@ struct LoopState {
     target: Option<f32>,
 }
 
-/// RC10_LIB's incremental PID step, kept apart from rc10's own
-/// [`IncrementalPid`](rc10_core::pid::IncrementalPid), which differs on purpose. RC10_LIB's:
-/// - outputs 0 on its first call, and takes that call's error as the previous one: the
-///   proportional term only ever adds the error's *changes*, so a step is not met by a kick
-///   of kp·e but by the integral alone;
-/// - sets an error inside the deadband to 0 and still applies the increments: entering the
-///   band steps the output back by kp times the last error, and leaving it steps it up by kp
-///   times the new one (rc10 leaves the output and the history alone inside the band);
-/// - adds `ki · e` and `kd · (e − 2e₁ + e₂)` per call, with no `dt`: each call is one tick,
-///   however much time passed (its `dt` only feeds the differentiator, off here);
-/// - clamps the output, and carries the clamped output into the next call.
+/// RC10_LIB's incremental PID step (see the module docs for how it differs from rc10's).
 #[derive(Debug, Default)]
 struct LegacyPid {
     /// Output, mA.
