@@ -63,13 +63,6 @@ pub enum ControlMode {
     TotalAngle,
 }
 
-impl ControlMode {
-    /// Whether the mode runs a loop on the motor's feedback (speed, angle, multi-turn angle).
-    pub const fn is_closed_loop(self) -> bool {
-        matches!(self, Self::Speed | Self::Angle | Self::TotalAngle)
-    }
-}
-
 /// Why a target was refused (the previous target stays in force).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -45,11 +45,6 @@ const GM6020_MAX_VOLTAGE_RAW: i16 = 30000;
 /// DJI ESCs send feedback every millisecond.
 const FEEDBACK_PERIOD_US: u64 = 1000;
 
-/// Closed-loop modes hold their command, instead of running the loops on the last reading,
-/// from the third tick in a row that finds no new frame (at 1 kHz: three frames lost in a
-/// row, or a receive path that has stalled). The offline timeout then zeroes it as before.
-const HOLD_AFTER_TICKS: u32 = 3;
-
 /// How far after the last tick a feedback timestamp is still trusted for timing.
 const TRUST_AHEAD: crate::time::Duration =
     crate::time::Duration::from_micros(2 * FEEDBACK_PERIOD_US);
@@ -294,9 +289,6 @@ struct DjiState {
     cascade: Cascade,
     encoder: Encoder,
     rotor_rpm: i16,
-    /// Ticks since the last accepted frame, this one included (counted only while online:
-    /// the offline timeout ends a run of them long before it could wrap).
-    ticks_since_feedback: u32,
     /// The last accepted frame's 8 data bytes; all ones (an angle of 0xFFFF, which no valid
     /// frame has) before the first and after going offline.
     last_data: u64,
@@ -452,7 +444,6 @@ impl DjiMotor {
                 encoder,
                 rotor_rpm: 0,
                 last_data: u64::MAX,
-                ticks_since_feedback: 0,
                 speed_rpm: 0.0,
                 current_amps: None,
                 temperature_c: None,
@@ -663,7 +654,6 @@ impl DjiMotor {
         let data = u64::from_ne_bytes(*d);
         if data == s.last_data {
             s.liveness.record_feedback_in_order(now);
-            s.ticks_since_feedback = 0;
             return Ok(());
         }
         s.last_data = data;
@@ -724,7 +714,6 @@ impl DjiMotor {
             }
         }
         s.liveness.record_feedback_in_order(now);
-        s.ticks_since_feedback = 0;
         Ok(())
     }
 }
@@ -769,16 +758,6 @@ impl CanNode for DjiMotor {
             }
             if s.pending {
                 s.apply_pending_home();
-            }
-            // No new frame for three ticks in a row: a closed loop would wind its integral on a
-            // reading that no longer changes, and push that onto a motor that may still take
-            // commands. It holds the command it gave last (a sample and hold) until feedback
-            // returns, or the offline timeout zeroes it. Open-loop modes go on: a current
-            // target (a stop, say) must reach the motor. (`ticks_since_feedback` counts this
-            // tick: 1 when a frame came since the last tick.)
-            s.ticks_since_feedback = s.ticks_since_feedback.wrapping_add(1);
-            if s.ticks_since_feedback > HOLD_AFTER_TICKS && s.cascade.mode().is_closed_loop() {
-                return;
             }
             let limit = s.limit;
             // Angles cost a 64-bit division; only the ticks that run the angle loop read them.
