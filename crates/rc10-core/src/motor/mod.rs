@@ -445,6 +445,22 @@ mod tests {
     }
 
     #[test]
+    fn a_stamp_older_than_the_last_one_does_not_move_the_last_feedback_back() {
+        // A transport that stamps frames itself hands over a frame from 5 ms before the one
+        // it already gave: the motor was heard from at 50 ms, not 45 ms (which would bring
+        // the offline timeout 5 ms closer).
+        let h = HealthConfig::DEFAULT;
+        let mut l = Liveness::NEW;
+        l.record_feedback(Instant::from_millis(50));
+        l.record_feedback(Instant::from_millis(45));
+        assert_eq!(l.last_feedback(), Some(Instant::from_millis(50)));
+        assert!(!l.check(&h, Instant::from_millis(148)));
+        assert!(l.is_online()); // 98 ms after 50 ms (103 ms after 45 ms)
+        l.record_feedback(Instant::from_millis(149));
+        assert_eq!(l.last_feedback(), Some(Instant::from_millis(149)));
+    }
+
+    #[test]
     fn feedback_stamped_far_in_the_future_does_not_keep_a_motor_online() {
         let h = HealthConfig::DEFAULT;
         let mut l = Liveness::NEW;
