@@ -194,10 +194,8 @@ pub fn bit_timing(clock_hz: u32, bitrate_bps: u32) -> Option<BitTiming> {
         let last = quanta.saturating_sub(2);
         let below = (ideal_milli / 1000).max(3).min(last);
         for upto in [below, below.saturating_add(1).min(last)] {
-            // seg2 ≥ 2: the controller's information processing time after the sample point.
-            let Some(seg2) = quanta.checked_sub(upto).filter(|&s| s >= 2) else {
-                continue;
-            };
+            // At least 2 (`upto ≤ last`): the controller's processing time after sampling.
+            let seg2 = quanta.saturating_sub(upto);
             let (Ok(seg1), Ok(seg2)) = (u8::try_from(upto.saturating_sub(1)), u8::try_from(seg2))
             else {
                 continue;
