@@ -510,3 +510,30 @@ fn example_mecanum_file_drives_and_fails_safe() {
     assert!(end.link_lost);
     assert!(end.achieved.vx_m_s.abs() < 0.05, "{end:?}");
 }
+
+#[test]
+fn a_stalled_receiver_holds_the_speed_integral_instead_of_ramping_the_command() {
+    use rc10_sim::scenario::Fault;
+    // A small step (0 -> 20 rpm at 10 ms: P is 0.6 A/rpm · 20 rpm = 12 A, within the 20 A
+    // limit) and the receive path blocked from 11 to 41 ms: rc10 hears nothing new, the motor
+    // stays online. Integrating the 20 rpm error it last measured would ramp the command by
+    // ki · e = 8 A/(rpm·s) · 20 rpm = 0.16 A every tick; held, the command stays put from 3 ms
+    // after the last frame until frames come again.
+    let mut s = scenario("m3508-speed-step");
+    s.targets[0].steps = vec![(0, 0.0), (10, 20.0)];
+    s.faults = vec![Fault::RxStall {
+        from_ms: 11,
+        to_ms: 41,
+    }];
+    let r = run(&s).unwrap();
+    let series = motor_series(&r, 0);
+    let at = |t: u64| series.iter().find(|(ms, _)| *ms == t).unwrap().1;
+    let held = at(15).command;
+    assert!((12.0..14.0).contains(&held), "{held}");
+    for t in 15..=40 {
+        let m = at(t);
+        assert!(m.online, "{t}");
+        assert_eq!(m.command, held, "{t} ms");
+    }
+    assert_eq!(r.offline_events, vec![0]);
+}

@@ -11,6 +11,7 @@
 //! - The limit in force is an argument of every [`Cascade::step`]: the output never exceeds
 //!   it and the speed loop's anti-windup works against it.
 //! - A feed-forward (command units) is added by the speed loop in speed and angle modes.
+//! - While the feedback is stale ([`Measured::stale`]) both loops hold their integrals.
 
 use super::ControlMode;
 use crate::math::{saturate, wrap_deg_360};
@@ -40,6 +41,15 @@ pub struct Measured {
     /// Output-shaft multi-turn angle in degrees. Read only on ticks when
     /// [`Cascade::angle_loop_due`].
     pub total_angle_deg: f32,
+    /// The readings are stale: feedback frames have stopped coming for longer than the
+    /// device's feedback period allows (lost frames, a stalled receive path), and the motor
+    /// is not yet offline. Both loops then hold their integrals where they are (still within
+    /// the limits in force): integrating an error whose measurement no longer changes winds
+    /// the loop up by whatever the reading missed, and the command jumps when feedback
+    /// returns. Proportional and derivative terms, feed-forward, targets, mode switches and
+    /// limits all act as usual. [`DjiMotor`](super::dji::DjiMotor) sets it once its newest
+    /// frame is more than 3 ms (three feedback periods) old.
+    pub stale: bool,
 }
 
 /// The cascade's state: mode, target and the two loops.
@@ -260,12 +270,13 @@ impl Cascade {
                     };
                     // Every `angle_divider` ticks: the general entry point (its finiteness
                     // checks cost nothing that matters here).
-                    self.speed_target_rpm = self.angle.output_within(
+                    self.speed_target_rpm = self.angle.output_integrating(
                         self.target,
                         measured,
                         0.0,
                         self.angle_dt_s,
                         f32::INFINITY,
+                        !m.stale,
                     );
                     self.ticks_since_angle = 0;
                     self.angle_dt_s = 0.0;
@@ -283,6 +294,7 @@ impl Cascade {
             self.feed_forward,
             dt_s,
             limit,
+            !m.stale,
         );
         self.applied = true;
         self.output
@@ -410,6 +422,45 @@ mod tests {
         c.set_target(ControlMode::Current, 1.0);
         c.set_target(ControlMode::Speed, 0.0);
         assert!((c.step(&Measured::default(), 0.001, 20.0) - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn stale_readings_hold_both_integrals_while_everything_else_acts() {
+        let mut c = Cascade::new(CascadeConfig {
+            speed: PidConfig::new(0.1, 10.0, 0.0).with_output_limit(20.0),
+            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
+            angle_divider: 1,
+        })
+        .unwrap();
+        let fresh = Measured::default();
+        let stale = Measured {
+            stale: true,
+            ..Default::default()
+        };
+        c.set_target(ControlMode::Speed, 10.0);
+        // p = 0.1·10 = 1, i = 10·10·0.001 = 0.1.
+        assert!((c.step(&fresh, 0.001, 20.0) - 1.1).abs() < 1e-6);
+        // Stale for 50 ticks: the integral stays at 0.1 (integrating would add 0.1 a tick).
+        for _ in 0..50 {
+            assert!((c.step(&stale, 0.001, 20.0) - 1.1).abs() < 1e-6);
+        }
+        assert!((c.speed.integral() - 0.1).abs() < 1e-7);
+        // A new target acts at once through P (0.1·30 = 3), and so does a lower limit.
+        c.set_target(ControlMode::Speed, 30.0);
+        assert!((c.step(&stale, 0.001, 20.0) - 3.1).abs() < 1e-6);
+        assert_eq!(c.step(&stale, 0.001, 2.0), 2.0);
+        // Fresh again: integration resumes from the held value, 0.1 + 10·30·0.001 = 0.4.
+        assert!((c.step(&fresh, 0.001, 20.0) - 3.4).abs() < 1e-5);
+        // The angle loop too: 10° of error, p = 100 rpm, i = 2·10·0.001 = 0.02 rpm.
+        c.set_target(ControlMode::TotalAngle, 10.0);
+        c.step(&fresh, 0.001, 20.0);
+        assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        for _ in 0..20 {
+            c.step(&stale, 0.001, 20.0);
+            assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        }
+        c.step(&fresh, 0.001, 20.0);
+        assert!((c.speed_target_rpm() - 100.04).abs() < 1e-4);
     }
 
     #[test]

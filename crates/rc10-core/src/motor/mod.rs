@@ -376,20 +376,41 @@ impl Liveness {
     /// read the clock, or a bogus timestamp far in the future) is clamped to `now`: it counts
     /// as fresh for one offline timeout, never longer.
     pub fn check(&mut self, health: &HealthConfig, now: Instant) -> bool {
-        let online = match self.last_feedback {
+        self.check_staleness(health, now, Duration::MAX).0
+    }
+
+    /// [`check`](Self::check), also telling whether the newest feedback is more than
+    /// `stale_after` old at `now` (or there is none): `(went_offline, stale)`. The age is
+    /// worked out once for both.
+    #[inline(always)]
+    pub(crate) fn check_staleness(
+        &mut self,
+        health: &HealthConfig,
+        now: Instant,
+        stale_after: Duration,
+    ) -> (bool, bool) {
+        let (online, stale) = match self.last_feedback {
             // A stamp at `now` or after it (clamped to `now`): fresh.
             Some(t) if t >= now => {
                 self.last_feedback = Some(now);
-                true
+                (true, false)
             }
-            last => health.is_online(last, now),
+            Some(t) => {
+                // `t < now`: no wrap.
+                let age = now.as_ticks().wrapping_sub(t.as_ticks());
+                (
+                    age <= health.offline_timeout.as_ticks(),
+                    age > stale_after.as_ticks(),
+                )
+            }
+            None => (false, true),
         };
         let went_offline = self.online && !online;
         if went_offline {
             self.offline_events = self.offline_events.wrapping_add(1);
         }
         self.online = online;
-        went_offline
+        (went_offline, stale)
     }
 
     /// Whether the motor was online at the last check.

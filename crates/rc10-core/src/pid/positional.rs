@@ -324,7 +324,7 @@ impl Pid {
         if !all_finite(target, measurement, feed_forward) {
             return PidTerms::ZERO;
         }
-        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit);
+        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit, true);
         self.last
     }
 
@@ -340,15 +340,32 @@ impl Pid {
         dt_s: f32,
         limit: f32,
     ) -> f32 {
+        self.output_integrating(target, measurement, feed_forward, dt_s, limit, true)
+    }
+
+    /// [`output_within`](Self::output_within), holding the integral where it is (within the
+    /// limits in force) unless `integrate`: what a cascade runs while its feedback is stale,
+    /// so that the loop does not integrate an error whose measurement no longer changes.
+    #[inline]
+    pub(crate) fn output_integrating(
+        &mut self,
+        target: f32,
+        measurement: f32,
+        feed_forward: f32,
+        dt_s: f32,
+        limit: f32,
+        integrate: bool,
+    ) -> f32 {
         if !all_finite(target, measurement, feed_forward) {
             return 0.0;
         }
-        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit)
+        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit, integrate)
     }
 
     /// [`output_within`](Self::output_within) for a caller that keeps `target` and
     /// `feed_forward` finite itself (the cascade, whose setters refuse anything else): only
-    /// `measurement` is checked (a non-finite one returns `0.0` and changes nothing).
+    /// `measurement` is checked (a non-finite one returns `0.0` and changes nothing). Unless
+    /// `integrate`, the integral holds (see [`output_integrating`](Self::output_integrating)).
     #[inline]
     pub(crate) fn output_within_finite_target(
         &mut self,
@@ -357,13 +374,14 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
+        integrate: bool,
     ) -> f32 {
         if !measurement.is_finite() {
             return 0.0;
         }
         // The PI path only here, where the speed loop calls: one more copy of the step in
         // the firmware, not one per entry point.
-        self.step_finite::<true>(target, measurement, feed_forward, dt_s, limit)
+        self.step_finite::<true>(target, measurement, feed_forward, dt_s, limit, integrate)
     }
 
     /// One step for finite `target`, `measurement` and `feed_forward`: updates the state and
@@ -389,15 +407,15 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
+        integrate: bool,
     ) -> f32 {
+        let (t, m, ff) = (target, measurement, feed_forward);
         match self.path {
-            Path::PlainPi if PI_PATH => {
-                self.step_plain::<true>(target, measurement, feed_forward, dt_s, limit)
-            }
+            Path::PlainPi if PI_PATH => self.step_plain::<true>(t, m, ff, dt_s, limit, integrate),
             Path::PlainPi | Path::Plain => {
-                self.step_plain::<false>(target, measurement, feed_forward, dt_s, limit)
+                self.step_plain::<false>(t, m, ff, dt_s, limit, integrate)
             }
-            Path::General => self.step_general(target, measurement, feed_forward, dt_s, limit),
+            Path::General => self.step_general(t, m, ff, dt_s, limit, integrate),
         }
     }
 
@@ -457,6 +475,7 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
+        integrate: bool,
     ) -> f32 {
         let (out_limit, i_limit) = self.limits(feed_forward, limit);
         let c = &self.config;
@@ -473,7 +492,7 @@ impl Pid {
         } else {
             self.plain_derivative(measurement, dt_s, dt_ok)
         };
-        let integral = if dt_ok && (PI || self.config.ki != 0.0) {
+        let integral = if dt_ok && integrate && (PI || self.config.ki != 0.0) {
             let prev_error = match self.prev_error {
                 Some(e) => e,
                 None => error,
@@ -550,6 +569,7 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
+        integrate: bool,
     ) -> f32 {
         let (out_limit, i_limit) = self.limits(feed_forward, limit);
         let c = &self.config;
@@ -571,7 +591,7 @@ impl Pid {
 
         let c = &self.config;
         let in_band = raw_error.abs() <= c.integral_separation;
-        let integral = if dt_ok && c.ki != 0.0 && in_band {
+        let integral = if dt_ok && integrate && c.ki != 0.0 && in_band {
             // Trapezoid over in-band errors only: right after the error re-enters the band the
             // previous (separated) error is not folded in.
             let prev_error = match self.prev_error {
@@ -984,7 +1004,8 @@ mod tests {
             steps in proptest::collection::vec(
                 (proptest::num::f32::ANY, -1e4f32..1e4, -1e2f32..1e2,
                  prop_oneof![Just(0.001f32), proptest::num::f32::ANY],
-                 prop_oneof![Just(f32::INFINITY), proptest::num::f32::ANY]),
+                 prop_oneof![Just(f32::INFINITY), proptest::num::f32::ANY],
+                 prop_oneof![4 => Just(true), 1 => Just(false)]),
                 1..48),
         ) {
             let mode = if circular { ErrorMode::DEGREES } else { ErrorMode::Linear };
@@ -997,18 +1018,37 @@ mod tests {
             prop_assert_eq!(plain.path, if pi { Path::PlainPi } else { Path::Plain });
             let mut general = plain;
             general.path = Path::General;
-            for (target, meas, ff, dt, limit) in steps {
+            for (target, meas, ff, dt, limit, integrate) in steps {
                 // The plain (and PI) side through the cascade's entry point where its
                 // precondition holds (finite target and feed-forward), the public one where
-                // it does not; the general side always through the public one.
+                // it does not; the general side always through the public one, or the
+                // cascade's general one when the integral holds (stale readings).
                 let a = if target.is_finite() {
-                    let out = plain.output_within_finite_target(target, meas, ff, dt, limit);
+                    let out =
+                        plain.output_within_finite_target(target, meas, ff, dt, limit, integrate);
                     prop_assert_eq!(out.to_bits(), plain.last_terms().output.to_bits());
                     plain.last_terms()
-                } else {
+                } else if integrate {
                     plain.update_within(target, meas, ff, dt, limit)
+                } else {
+                    prop_assert_eq!(plain.output_integrating(target, meas, ff, dt, limit, false), 0.0);
+                    PidTerms::ZERO
                 };
-                let b = general.update_within(target, meas, ff, dt, limit);
+                let b = if integrate {
+                    general.update_within(target, meas, ff, dt, limit)
+                } else {
+                    let before = general.integral;
+                    let out = general.output_integrating(target, meas, ff, dt, limit, false);
+                    if !(target.is_finite() && meas.is_finite()) {
+                        prop_assert_eq!(out, 0.0);
+                        PidTerms::ZERO
+                    } else {
+                        // Held: at most clamped towards zero by the limits in force.
+                        prop_assert!(general.integral.abs() <= before.abs());
+                        prop_assert!(general.integral == before || general.integral * before >= 0.0);
+                        general.last_terms()
+                    }
+                };
                 let bits = |t: PidTerms| [t.p, t.i, t.d, t.ff, t.output].map(f32::to_bits);
                 prop_assert_eq!(bits(a), bits(b));
                 general.path = plain.path;

@@ -21,6 +21,10 @@
 //! both, and lets you raise it up to 30000 ([`DjiConfig::voltage_raw_limit`]). Volts are
 //! converted at 30000 ↔ 24 V (the 2018 manual's full scale at the rated supply; derived).
 //!
+//! Feedback that stops: while the newest frame is more than 3 ms old (at least two lost in a
+//! row) the loops hold their integrals ([`Measured::stale`]); after the offline timeout
+//! ([`HealthConfig`], 100 ms) the motor is offline and its command is zero.
+//!
 //! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
 //! with the same command ID into one frame per tick, and slots no motor uses are sent as zero.
 //! Registration rejects two motors that would share a slot or a feedback ID (for example an
@@ -44,6 +48,12 @@ const GM6020_MAX_VOLTAGE_RAW: i16 = 30000;
 
 /// DJI ESCs send feedback every millisecond.
 const FEEDBACK_PERIOD_US: u64 = 1000;
+
+/// How old the newest feedback may be before the loops count it as stale and hold their
+/// integrals ([`Measured::stale`]): three feedback periods, i.e. at least two frames in a
+/// row lost (one lost frame, or a tick that falls just before a frame, is normal).
+const STALE_AFTER: crate::time::Duration =
+    crate::time::Duration::from_micros(3 * FEEDBACK_PERIOD_US);
 
 /// How far after the last tick a feedback timestamp is still trusted for timing.
 const TRUST_AHEAD: crate::time::Duration =
@@ -747,7 +757,8 @@ impl CanNode for DjiMotor {
             if s.pending {
                 s.apply_pending_configs();
             }
-            if s.liveness.check(health, now) {
+            let (went_offline, stale) = s.liveness.check_staleness(health, now, STALE_AFTER);
+            if went_offline {
                 s.awaiting_return = true;
                 s.last_data = u64::MAX;
                 s.cascade.reset();
@@ -771,6 +782,7 @@ impl CanNode for DjiMotor {
                 speed_rpm: s.speed_rpm,
                 angle_deg,
                 total_angle_deg,
+                stale,
             };
             // `step` already keeps the command within `limit`.
             self.store_command(s.cascade.step(&measured, dt_s, limit));

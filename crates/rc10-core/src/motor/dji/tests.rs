@@ -336,10 +336,14 @@ fn offline_after_timeout_zeroes_command_and_recovers() {
 fn offline_resets_speed_loop_so_return_has_no_windup_kick() {
     let m = DjiMotor::m3508(1).unwrap();
     online(&m);
-    // A small error, so the loop integrates instead of sitting at the current limit.
+    // A small error, so the loop integrates instead of sitting at the current limit; the
+    // stalled motor keeps reporting (stale feedback would hold the integral).
     m.set_target_rpm(20.0).unwrap();
     for k in 0..50 {
-        tick(&m, T0 + Duration::from_millis(k));
+        let now = T0 + Duration::from_millis(k);
+        m.update_feedback(&fb(0x201, 0, 0, 0, 30 + k as u8), now)
+            .unwrap();
+        tick(&m, now);
     }
     let wound = m.speed_loop_terms().i;
     assert!(wound > 0.0);
@@ -349,6 +353,43 @@ fn offline_resets_speed_loop_so_return_has_no_windup_kick() {
     tick(&m, back);
     // First tick back: integral restarted from zero (one step's worth only).
     assert!(m.speed_loop_terms().i < wound / 10.0);
+}
+
+#[test]
+fn stale_feedback_holds_the_speed_integral_until_frames_return() {
+    // Default M3508 speed loop: kp 0.6 A/rpm, ki 8 A/(rpm·s). One frame at T0 (the motor at
+    // rest), then none: the motor stays online for 100 ms, but after 3 ms without a frame
+    // the integral must stop growing on an error that nobody measures.
+    let m = DjiMotor::m3508(1).unwrap();
+    online(&m);
+    m.set_target_rpm(20.0).unwrap();
+    let at = |ms: u64| T0 + Duration::from_millis(ms);
+    // Ages 0–3 ms integrate, 8·20·0.001 = 0.16 A a tick (the first trapezoid uses e twice).
+    for k in 0..4 {
+        tick(&m, at(k));
+        let i = m.speed_loop_terms().i;
+        assert!((i - 0.16 * (k + 1) as f32).abs() < 1e-5, "tick {k}: {i}");
+    }
+    // From 4 ms: held at 0.64 A, the command at 0.6·20 + 0.64 = 12.64 A.
+    for k in 4..60 {
+        tick(&m, at(k));
+        let s = m.state();
+        assert!(s.online);
+        assert!((s.command - 12.64).abs() < 1e-4, "tick {k}: {}", s.command);
+    }
+    // A new target still acts at once (0.6·10 + 0.64), and a lower user limit too.
+    m.set_target_rpm(10.0).unwrap();
+    tick(&m, at(60));
+    assert!((m.state().command - 6.64).abs() < 1e-4);
+    m.set_current_limit_amps(5.0).unwrap();
+    tick(&m, at(61));
+    assert_eq!(m.state().command, 5.0);
+    m.set_current_limit_amps(20.0).unwrap();
+    // Frames return (still at rest): integration resumes from 0.64, + 8·10·0.001.
+    m.update_feedback(&fb(0x201, 0, 0, 0, 31), at(70)).unwrap();
+    tick(&m, at(70));
+    assert!((m.speed_loop_terms().i - 0.72).abs() < 1e-5);
+    assert!((m.state().command - 6.72).abs() < 1e-4);
 }
 
 #[test]
