@@ -229,6 +229,13 @@ impl Cascade {
         self.target = target;
     }
 
+    /// The angle readings jumped without the shaft moving (its origin was moved: re-homing):
+    /// the angle loop forgets its error and measurement history, so the jump is not taken as
+    /// motion (a derivative kick for one angle step); its integral and the speed loop stay.
+    pub fn angle_origin_moved(&mut self) {
+        self.angle.forget_history();
+    }
+
     /// Forgets loop history and the present command (used when the motor goes offline); mode
     /// and target stay.
     pub fn reset(&mut self) {

@@ -658,6 +658,16 @@ impl Pid {
         self.integral = saturate(value_out, self.config.integral_limit);
     }
 
+    /// Forgets the error and measurement history and the D filter, keeping the integral: the
+    /// next step takes no derivative and starts its trapezoid from its own error. For a
+    /// measurement whose origin just moved (an encoder re-homed while running), whose jump is
+    /// no motion: differentiated, it would kick the output for a step.
+    pub fn forget_history(&mut self) {
+        self.prev_error = None;
+        self.prev_measurement = None;
+        self.d_filter.reset();
+    }
+
     /// Clears the integral, the error and measurement history and the D filter, so the next
     /// step behaves like the first (no derivative from stale history).
     pub fn reset(&mut self) {
@@ -909,6 +919,30 @@ mod tests {
         // Only this step's integral remains: ki · e · dt = 1 · (-100) · 0.001 (the +0.001 from
         // before the reset is gone).
         assert!((t.i + 0.1).abs() < 1e-6, "i = {}", t.i);
+    }
+
+    #[test]
+    fn forget_history_keeps_the_integral_and_takes_no_derivative_from_the_jump() {
+        // A measurement whose origin moves from 0 to 1000 while the shaft stays put.
+        for cutoff_hz in [0.0, 10.0] {
+            let config = PidConfig::new(0.5, 2.0, 0.3).with_d_cutoff_hz(cutoff_hz);
+            let mut c = pid(config);
+            for k in 0..5 {
+                c.update(1.0, k as f32 * 0.1, DT);
+            }
+            let integral = c.integral();
+            c.forget_history();
+            assert_eq!(c.integral(), integral);
+            // From here it steps exactly as a fresh loop preloaded with the same integral: no
+            // derivative of the jump, a trapezoid that does not fold in the old error, a D
+            // filter that starts from nothing.
+            let mut fresh = pid(config);
+            fresh.set_integral(integral);
+            for meas in [1000.4, 1000.5, 1000.7] {
+                let (a, b) = (c.update(1001.0, meas, DT), fresh.update(1001.0, meas, DT));
+                assert_eq!(a, b, "cutoff {cutoff_hz} Hz, measurement {meas}");
+            }
+        }
     }
 
     #[test]

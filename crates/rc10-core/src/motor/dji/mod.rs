@@ -360,10 +360,13 @@ impl DjiState {
     #[cold]
     #[inline(never)]
     fn apply_pending_home(&mut self) {
-        if let Some(deg) = self.pending_home_deg.take()
-            && !self.encoder.set_total_angle_deg(deg)
-        {
-            self.pending_home_deg = Some(deg); // no reading yet: try again next tick
+        if let Some(deg) = self.pending_home_deg.take() {
+            if self.encoder.set_total_angle_deg(deg) {
+                // The angles jump, the shaft does not move.
+                self.cascade.angle_origin_moved();
+            } else {
+                self.pending_home_deg = Some(deg); // no reading yet: try again next tick
+            }
         }
         self.pending = self.pending_home_deg.is_some();
     }
@@ -524,6 +527,12 @@ impl DjiMotor {
     /// The speed loop's last per-term output (for tuning and telemetry).
     pub fn speed_loop_terms(&self) -> crate::pid::PidTerms {
         self.state.lock(|s| s.borrow().cascade.speed_terms())
+    }
+
+    /// The angle loop's last per-term output in rpm (for tuning and telemetry): from the last
+    /// tick that ran it (every `angle_divider`th in angle modes).
+    pub fn angle_loop_terms(&self) -> crate::pid::PidTerms {
+        self.state.lock(|s| s.borrow().cascade.angle_terms())
     }
 
     /// Replaces the speed loop's gains and limits while running (live tuning), from the next

@@ -710,6 +710,31 @@ fn homing_through_the_trait_moves_the_total_angle_origin() {
 }
 
 #[test]
+fn homing_while_holding_a_total_angle_gives_no_derivative_kick() {
+    // An angle loop with D: kp 8 rpm/°, kd 0.1 rpm/(°/s), limited to 400 rpm, run every 10th
+    // tick (10 ms). The motor holds 0° (error 0); then the target and the homed reading both
+    // become 50°, together: still no error, and the shaft has not moved. Differentiating the
+    // reading's 50° jump would ask -0.1 · 50° / 0.01 s = -500 rpm (limited to -400).
+    let mut cfg = DjiConfig::default_for(DjiModel::M3508);
+    cfg.cascade.angle = PidConfig::new(8.0, 0.0, 0.1).with_output_limit(400.0);
+    let m = DjiMotor::new(DjiModel::M3508, 1, cfg).unwrap();
+    online(&m);
+    m.set_target_total_angle_deg(0.0).unwrap();
+    for _ in 0..10 {
+        tick(&m, T0);
+        assert_eq!(m.state().target, 0.0);
+    }
+    m.set_target_total_angle_deg(50.0).unwrap();
+    m.set_total_angle_here_deg(50.0).unwrap();
+    tick(&m, T0); // homes, then runs the angle loop (its 10th tick)
+    assert!((m.total_angle_deg().unwrap() - 50.0).abs() < 0.01);
+    let terms = m.angle_loop_terms();
+    assert_eq!(terms.d, 0.0);
+    // P: the homed reading is rounded to a rotor count (0.002° at the output).
+    assert!(terms.output.abs() < 0.1, "{terms:?}");
+}
+
+#[test]
 fn live_speed_gains_apply_from_the_next_tick() {
     let m = DjiMotor::m3508(1).unwrap();
     online(&m);
