@@ -536,4 +536,13 @@ fn a_stalled_receiver_holds_the_speed_integral_instead_of_ramping_the_command() 
         assert_eq!(m.command, held, "{t} ms");
     }
     assert_eq!(r.offline_events, vec![0]);
+    // Frames again: the loop measures the speed its held command drove the motor to and
+    // brings it back to 20 rpm.
+    assert_ne!(at(45).command, held);
+    let settled = at(300);
+    assert!(
+        (settled.true_rpm - 20.0).abs() < 1.0,
+        "{}",
+        settled.true_rpm
+    );
 }

@@ -45,10 +45,11 @@ pub struct Measured {
     /// device's feedback period allows (lost frames, a stalled receive path), and the motor
     /// is not yet offline. Both loops then hold their integrals where they are (still within
     /// the limits in force): integrating an error whose measurement no longer changes winds
-    /// the loop up by whatever the reading missed, and the command jumps when feedback
+    /// the loop up by whatever the reading missed, and that has to unwind once feedback
     /// returns. Proportional and derivative terms, feed-forward, targets, mode switches and
-    /// limits all act as usual. [`DjiMotor`](super::dji::DjiMotor) sets it once its newest
-    /// frame is more than 3 ms (three feedback periods) old.
+    /// limits all act as usual. An angle step on stale readings holds the angle loop's
+    /// integral for its whole interval. [`DjiMotor`](super::dji::DjiMotor) sets it once its
+    /// newest frame is more than 3 ms (three feedback periods) old.
     pub stale: bool,
 }
 

@@ -496,6 +496,37 @@ mod tests {
     }
 
     #[test]
+    fn staleness_is_the_age_of_the_newest_stamp_beyond_the_threshold() {
+        let h = HealthConfig::DEFAULT;
+        let after = Duration::from_millis(3);
+        let mut l = Liveness::NEW;
+        // Never heard from: offline and stale.
+        assert_eq!(
+            l.check_staleness(&h, Instant::from_millis(5), after),
+            (false, true)
+        );
+        l.record_feedback(Instant::from_millis(10));
+        let at = |us: u64| Instant::from_micros(10_000 + us);
+        // Exactly 3 ms old is fresh, 1 µs more is stale; online either way.
+        assert_eq!(l.check_staleness(&h, at(3000), after), (false, false));
+        assert_eq!(l.check_staleness(&h, at(3001), after), (false, true));
+        assert!(l.is_online());
+        // Offline at 100 ms + 1 µs, as `check` says, and stale.
+        assert_eq!(l.check_staleness(&h, at(100_000), after), (false, true));
+        assert_eq!(l.check_staleness(&h, at(100_001), after), (true, true));
+        assert_eq!(l.offline_events(), 1);
+        // A stamp ahead of `now` is clamped to it: fresh, then ages from `now`.
+        let now = Instant::from_millis(500);
+        l.record_feedback(now + Duration::from_secs(60));
+        assert_eq!(l.check_staleness(&h, now, after), (false, false));
+        assert!(l.is_online());
+        assert_eq!(
+            l.check_staleness(&h, now + Duration::from_micros(3001), after),
+            (false, true)
+        );
+    }
+
+    #[test]
     fn online_window_is_inclusive_of_timeout() {
         let h = HealthConfig::DEFAULT;
         let t0 = Instant::from_millis(1000);

@@ -922,6 +922,24 @@ mod tests {
     }
 
     #[test]
+    fn output_within_is_the_output_of_update_within() {
+        let config = PidConfig::new(0.5, 2.0, 0.3).with_output_limit(4.0);
+        let (mut a, mut b) = (pid(config), pid(config));
+        for (target, meas, limit) in [(3.0, 0.0, 10.0), (3.0, 1.0, 2.5), (-2.0, 1.5, 10.0)] {
+            let out = a.output_within(target, meas, 0.25, DT, limit);
+            assert_eq!(out, b.update_within(target, meas, 0.25, DT, limit).output);
+            assert_eq!(a.last_terms(), b.last_terms());
+        }
+        // The first step: p = 0.5·3 = 1.5, i = 2·3·0.001 = 0.006, d = 0, ff 0.25.
+        let mut c = pid(config);
+        assert!((c.output_within(3.0, 0.0, 0.25, DT, 10.0) - 1.756).abs() < 1e-6);
+        // Rejected input: 0, nothing changes.
+        assert_eq!(c.output_within(f32::NAN, 0.0, 0.0, DT, 10.0), 0.0);
+        assert_eq!(c.output_within(1.0, f32::INFINITY, 0.0, DT, 10.0), 0.0);
+        assert!((c.integral() - 0.006).abs() < 1e-7);
+    }
+
+    #[test]
     fn forget_history_keeps_the_integral_and_takes_no_derivative_from_the_jump() {
         // A measurement whose origin moves from 0 to 1000 while the shaft stays put.
         for cutoff_hz in [0.0, 10.0] {
@@ -1077,9 +1095,9 @@ mod tests {
                         prop_assert_eq!(out, 0.0);
                         PidTerms::ZERO
                     } else {
-                        // Held: at most clamped towards zero by the limits in force.
-                        prop_assert!(general.integral.abs() <= before.abs());
-                        prop_assert!(general.integral == before || general.integral * before >= 0.0);
+                        // Held: only clamped to the limits in force.
+                        let (_, i_limit) = general.limits(ff, limit);
+                        prop_assert_eq!(general.integral.to_bits(), clamp_abs(before, i_limit).to_bits());
                         general.last_terms()
                     }
                 };

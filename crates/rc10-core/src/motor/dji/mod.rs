@@ -21,9 +21,11 @@
 //! both, and lets you raise it up to 30000 ([`DjiConfig::voltage_raw_limit`]). Volts are
 //! converted at 30000 ↔ 24 V (the 2018 manual's full scale at the rated supply; derived).
 //!
-//! Feedback that stops: while the newest frame is more than 3 ms old (at least two lost in a
+//! Feedback that stops: while the newest frame is more than 3 ms old (three or more lost in a
 //! row) the loops hold their integrals ([`Measured::stale`]); after the offline timeout
-//! ([`HealthConfig`], 100 ms) the motor is offline and its command is zero.
+//! ([`HealthConfig`], 100 ms) the motor is offline and its command is zero. The age is that
+//! of the frame's timestamp: a receiver that stamps frames when it reads them makes a backlog
+//! read after a stalled receive path look fresh, for the tick or so before newer frames come.
 //!
 //! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
 //! with the same command ID into one frame per tick, and slots no motor uses are sent as zero.
@@ -50,8 +52,9 @@ const GM6020_MAX_VOLTAGE_RAW: i16 = 30000;
 const FEEDBACK_PERIOD_US: u64 = 1000;
 
 /// How old the newest feedback may be before the loops count it as stale and hold their
-/// integrals ([`Measured::stale`]): three feedback periods, i.e. at least two frames in a
-/// row lost (one lost frame, or a tick that falls just before a frame, is normal).
+/// integrals ([`Measured::stale`]): three feedback periods. After `n` frames lost in a row
+/// the age at a tick is between `n` and `n + 1` periods, so one or two lost frames keep the
+/// loops integrating and three or more hold them.
 const STALE_AFTER: crate::time::Duration =
     crate::time::Duration::from_micros(3 * FEEDBACK_PERIOD_US);
 

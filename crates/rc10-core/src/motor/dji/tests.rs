@@ -719,14 +719,19 @@ fn homing_while_holding_a_total_angle_gives_no_derivative_kick() {
     cfg.cascade.angle = PidConfig::new(8.0, 0.0, 0.1).with_output_limit(400.0);
     let m = DjiMotor::new(DjiModel::M3508, 1, cfg).unwrap();
     online(&m);
+    m.set_target_total_angle_deg(2.0).unwrap();
+    tick(&m, T0); // the first tick in the mode runs the angle loop: p = 8 · 2° = 16 rpm
+    assert!((m.angle_loop_terms().p - 16.0).abs() < 0.1);
     m.set_target_total_angle_deg(0.0).unwrap();
     for _ in 0..10 {
         tick(&m, T0);
-        assert_eq!(m.state().target, 0.0);
     }
+    assert!(m.angle_loop_terms().output.abs() < 0.1); // the 10th ran it again, at 0°
     m.set_target_total_angle_deg(50.0).unwrap();
     m.set_total_angle_here_deg(50.0).unwrap();
-    tick(&m, T0); // homes, then runs the angle loop (its 10th tick)
+    for _ in 0..10 {
+        tick(&m, T0); // the first homes; the 10th runs the angle loop
+    }
     assert!((m.total_angle_deg().unwrap() - 50.0).abs() < 0.01);
     let terms = m.angle_loop_terms();
     assert_eq!(terms.d, 0.0);
