@@ -270,7 +270,8 @@ impl DmStatus {
 pub struct DmConfig {
     /// Ranges set in the motor.
     pub limits: MitLimits,
-    /// The master ID its feedback arrives on (MST_ID in Damiao's tool; give each motor its own).
+    /// The master ID its feedback arrives on (MST_ID in Damiao's tool; give each motor its own),
+    /// below 0x7FF.
     pub master_id: u16,
     /// Velocity gain used by [`Motor::set_target_rpm`], N·m·s/rad.
     pub speed_kd: f32,
@@ -316,8 +317,9 @@ impl DmConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum DmError {
-    /// The CAN ID is 0x7FF or above (0x7FF is Damiao's parameter channel: an MIT frame
-    /// there could be read as a register write), the master ID is above 0x7FF, or they are
+    /// The CAN ID or the master ID is 0x7FF or above (0x7FF is Damiao's parameter channel:
+    /// an MIT command, or a feedback frame whose first bytes match a motor's ID and whose third
+    /// is 0x55 or 0xAA, could be read there as a register write or a save), or they are
     /// equal.
     InvalidId,
     /// A range is not finite and positive or above [`MAX_MIT_RANGE`], a gain is not within the
@@ -400,7 +402,7 @@ pub struct DmMotor {
 impl DmMotor {
     /// A motor commanded on `can_id` whose feedback arrives on `config.master_id`.
     pub const fn new(can_id: u16, config: DmConfig) -> Result<Self, DmError> {
-        if can_id >= 0x7FF || config.master_id > 0x7FF || can_id == config.master_id {
+        if can_id >= 0x7FF || config.master_id >= 0x7FF || can_id == config.master_id {
             return Err(DmError::InvalidId);
         }
         let l = config.limits;
@@ -492,7 +494,8 @@ impl DmMotor {
     ///   offset from [`Motor::set_total_angle_here_deg`] are cleared when FE is sent; a
     ///   homing asked for before then applies to the first reading after it). An angle or
     ///   total-angle target refers to the new zero from then on: a joint holding 100° moves
-    ///   another 100° after FE. Disable it (or set the target it should hold) around FE.
+    ///   another 100° after FE. Disable it (or set the target it should hold) around FE:
+    ///   Damiao's guides set the zero with the motor disabled.
     pub fn send_special(&self, special: DmSpecial) {
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
@@ -1408,6 +1411,12 @@ mod tests {
             DmError::InvalidId
         );
         assert!(DmMotor::new(0x7FE, DmConfig::new(0x11)).is_ok());
+        // The same for the master ID its feedback comes on.
+        assert_eq!(
+            DmMotor::new(1, DmConfig::new(0x7FF)).unwrap_err(),
+            DmError::InvalidId
+        );
+        assert!(DmMotor::new(1, DmConfig::new(0x7FE)).is_ok());
         let mut short = DmConfig::new(0x11);
         short.limits.p_max_rad = 3.0; // below π: no equivalent angle inside for some targets
         assert_eq!(DmMotor::new(1, short).unwrap_err(), DmError::InvalidLimit);

@@ -8,7 +8,7 @@
 //! | `SET_CURRENT` | 1 | i32 motor current in mA |
 //! | `SET_CURRENT_BRAKE` | 2 | i32 brake current in mA |
 //! | `SET_RPM` | 3 | i32 electrical rpm (eRPM = mechanical rotor rpm × pole pairs) |
-//! | `SET_POS` | 4 | i32 rotor position in degrees × 1 000 000 |
+//! | `SET_POS` | 4 | i32 position in degrees × 1 000 000 (see "Position" below) |
 //! | `STATUS` (1) | 9 | i32 eRPM, i16 motor current × 10, i16 duty × 1000 |
 //! | `STATUS_4` | 16 | i16 MOSFET temp × 10, i16 motor temp × 10, i16 input current × 10, i16 PID position × 50 |
 //!
@@ -21,6 +21,15 @@
 //! current (a braking torque you choose) whenever the speed command would reach the wire as
 //! eRPM 0; `None` (default) sends `SET_RPM 0`. While offline or disabled the driver sends
 //! `SET_CURRENT 0`, which releases the motor.
+//!
+//! Position: the VESC's position (the `SET_POS` target and STATUS_4's PID position) is its
+//! encoder's angle divided by VESC Tool's "Angle Division" (`p_pid_ang_div`, default 1),
+//! shifted by its offset (vedderb/bldc `mcpwm_foc.c`, `mc_interface.c`). It is the rotor's
+//! mechanical angle, as this driver takes it, only with an encoder fitted and configured
+//! (position control needs one; sensorless, the VESC reports its *electrical* angle, which
+//! turns pole-pairs times per revolution), Angle Division 1 and offset 0. So use angle
+//! targets and [`MotorState::angle_deg`] only on a VESC set up that way; the driver offers
+//! them in direct drive only (with a gearbox the rotor's angle is not the output's).
 //!
 //! Slow speeds: the VESC firmware's speed loop does not run below its minimum eRPM (VESC Tool
 //! "Minimum ERPM", 900 by default, vedderb/bldc): it brakes instead. An output target below
@@ -72,7 +81,9 @@ pub mod packet {
 /// [`VescConfig::status_hz`] and its messages (`can_status_msgs_r1`, a mask) to this set,
 /// bit for bit (STATUS_1 is bit 0 … STATUS_5 bit 4), and leave rate 2's messages empty. The
 /// firmware's default sends no status at all, which this driver sees as a motor that never
-/// comes online. Firmware 5.x: "CAN Status Message Mode" (`1`, `1_2`, … `1_2_3_4_5`) and one
+/// comes online; VESC Tool's setup wizard turns on STATUS_1 to STATUS_4, which this set must
+/// then list (or the VESC be set back), or registration's frame budget counts a quarter of
+/// the frames the VESC really sends. Firmware 5.x: "CAN Status Message Mode" (`1`, `1_2`, … `1_2_3_4_5`) and one
 /// rate.
 ///
 /// ```
@@ -186,7 +197,8 @@ pub struct VescConfig {
     /// wire as eRPM 0 (below half an eRPM).
     pub zero_speed_brake_amps: Option<f32>,
     /// Frames per second the VESC sends of each status packet (firmware 6.x:
-    /// `can_status_rate_1`, up to 1000 Hz; the firmware's default is 50 Hz).
+    /// `can_status_rate_1`; the firmware's default is 50 Hz). Every one counts in the bus's
+    /// frame budget: at 1 Mbit/s an 8-byte STATUS frame holds the wire for 131–160 µs.
     pub status_hz: u32,
     /// Which status packets it sends (default STATUS_1 only; add STATUS_4 for temperatures
     /// and the angle).
@@ -264,7 +276,8 @@ struct VescState {
     duty: f32,
     fet_temp_c: Option<f32>,
     motor_temp_c: Option<f32>,
-    /// STATUS_4's PID position: rotor degrees.
+    /// STATUS_4's PID position in degrees: the rotor's angle on a VESC set up as the module
+    /// docs say (encoder, Angle Division 1).
     pid_position_deg: Option<f32>,
     user_current_limit: f32,
     liveness: Liveness,
@@ -550,7 +563,8 @@ impl Motor for VescMotor {
     }
 
     /// Position control uses the VESC's rotor position loop, so it is an output-shaft angle
-    /// only for direct drive; geared VESC motors report [`TargetError::Unsupported`].
+    /// only for direct drive; geared VESC motors report [`TargetError::Unsupported`]. The VESC
+    /// needs an encoder, and Angle Division 1 (see the module docs, "Position").
     fn set_target_angle_deg(&self, angle_deg: f32) -> Result<(), TargetError> {
         if !self.config.gear.is_direct() {
             return Err(TargetError::Unsupported);
