@@ -96,7 +96,67 @@ impl BusConfig {
         self.tx_depth = frames;
         self
     }
+
+    /// The fastest classic CAN bitrate, in bits per second.
+    pub const MAX_BITRATE_BPS: u32 = 1_000_000;
+
+    /// Whether this configuration can run a bus; [`BusBuilder::register`] refuses every node
+    /// on a bus whose configuration cannot. A `tx_depth` of 0 is allowed (a bus that only
+    /// listens; a node that sends is refused with [`RegisterError::TxDepth`]), and so is an
+    /// infinite `max_load_percent` (no load limit).
+    ///
+    /// ```
+    /// use rc10_core::bus::{BusConfig, ConfigError};
+    /// use rc10_core::time::Duration;
+    /// assert_eq!(BusConfig::DEFAULT.check(), Ok(()));
+    /// let zero_tick = BusConfig { tick_period: Duration::from_ticks(0), ..BusConfig::DEFAULT };
+    /// assert_eq!(zero_tick.check(), Err(ConfigError::ZeroTickPeriod));
+    /// ```
+    pub fn check(&self) -> Result<(), ConfigError> {
+        if self.tick_period.as_ticks() == 0 {
+            return Err(ConfigError::ZeroTickPeriod);
+        }
+        if self.bitrate_bps == 0 || self.bitrate_bps > Self::MAX_BITRATE_BPS {
+            return Err(ConfigError::Bitrate(self.bitrate_bps));
+        }
+        if self.max_load_percent.is_nan() || self.max_load_percent <= 0.0 {
+            return Err(ConfigError::MaxLoad(self.max_load_percent));
+        }
+        if self.rate_window.as_ticks() == 0 {
+            return Err(ConfigError::ZeroRateWindow);
+        }
+        Ok(())
+    }
 }
+
+/// What is wrong with a [`BusConfig`] ([`BusConfig::check`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// `tick_period` is zero: [`run_scheduler`]'s ticker would never wait, and the load
+    /// figures would be for a tick of no length.
+    ZeroTickPeriod,
+    /// `bitrate_bps` (this value) is zero or above classic CAN's 1 Mbit/s.
+    Bitrate(u32),
+    /// `max_load_percent` (this value) is NaN, zero or negative: NaN would admit any load,
+    /// the others none.
+    MaxLoad(f32),
+    /// `rate_window` is zero: [`Bus::rates`] would cover a single tick.
+    ZeroRateWindow,
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::ZeroTickPeriod => f.write_str("bus tick period is zero"),
+            Self::Bitrate(bps) => write!(f, "bus bitrate {bps} bit/s is not in 1..=1000000"),
+            Self::MaxLoad(percent) => write!(f, "bus load limit {percent} % is not above zero"),
+            Self::ZeroRateWindow => f.write_str("bus rate window is zero"),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}
 
 impl Default for BusConfig {
     fn default() -> Self {
@@ -146,6 +206,8 @@ pub enum BudgetLevel {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RegisterError {
+    /// The bus's [`BusConfig`] cannot run a bus ([`BusConfig::check`]): no node is accepted.
+    Config(ConfigError),
     /// The bus already holds its capacity (`N`) of nodes.
     Full,
     /// The node declared more ID filters than an [`IdSet`] holds.
@@ -206,6 +268,7 @@ pub enum RegisterError {
 impl fmt::Display for RegisterError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
+            Self::Config(e) => write!(f, "invalid bus configuration: {e}"),
             Self::Full => f.write_str("bus registry full"),
             Self::TooManyIds => f.write_str("node declares more ID filters than fit an IdSet"),
             Self::FeedbackConflict { existing, id } => {
@@ -301,7 +364,8 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
 
     /// Adds `node`, or says why it cannot be added (the builder is then unchanged).
     ///
-    /// Checks, against every node already registered: no shared feedback ID, no shared
+    /// Checks the bus's configuration first ([`BusConfig::check`]); then, against every
+    /// node already registered: no shared feedback ID, no shared
     /// command slot, no two senders on one ID (whole frames, or a whole frame on a slot
     /// frame's ID), no transmission on an ID anyone listens on; against the node itself: no
     /// transmission on an ID it listens on, no whole frame on its own slot frame's ID
@@ -309,6 +373,7 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
     /// command frames of a tick fit [`BusConfig::tx_depth`] and the load fits
     /// [`BusConfig::max_load_percent`].
     pub fn register(&mut self, node: &'a dyn CanNode) -> Result<(), RegisterError> {
+        self.config.check().map_err(RegisterError::Config)?;
         if self.nodes.is_full() {
             return Err(RegisterError::Full);
         }
@@ -719,8 +784,15 @@ pub struct TickerTicks {
 }
 
 impl TickerTicks {
-    /// Ticks every `period`.
+    /// The longest period a `TickerTicks` keeps: longer ones tick hourly.
+    pub const MAX_PERIOD: Duration = Duration::from_secs(3600);
+
+    /// Ticks every `period`, held within 1 µs…[`MAX_PERIOD`](Self::MAX_PERIOD). A zero
+    /// period is raised to 1 µs, as [`TickPacer`] raises it: a ticker that never waits would
+    /// never yield, and no other task on its executor would run. The upper bound keeps
+    /// embassy-time's `Ticker` from overflowing its clock (it panics there).
     pub fn every(period: Duration) -> Self {
+        let period = period.clamp(Duration::from_micros(1), Self::MAX_PERIOD);
         Self {
             ticker: embassy_time::Ticker::every(period),
         }

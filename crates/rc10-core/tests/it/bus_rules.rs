@@ -5,7 +5,9 @@
 //! 111 bits at 1 Mbit/s) and the documented pacing rules.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
-use rc10_core::bus::{BusBuilder, BusConfig, RegisterError, TickPacer, TickSource, TickerTicks};
+use rc10_core::bus::{
+    BusBuilder, BusConfig, ConfigError, RegisterError, TickPacer, TickSource, TickerTicks,
+};
 use rc10_core::can::{CanFrame, IdFilter};
 use rc10_core::motor::dji::DjiMotor;
 use rc10_core::node::{BusUsage, CanNode, FrameError, MAX_FRAMES_PER_TICK, TxBatch};
@@ -166,6 +168,151 @@ fn ticker_resync_forgets_ticks_already_due() {
             "next tick after {waited:?}"
         );
     });
+}
+
+#[test]
+fn a_zero_period_ticker_still_waits_between_ticks() {
+    // A ticker of period 0 is always due: the scheduler loop would never yield and the
+    // receiver task on the same executor would never run. Raised to 1 µs, tick k cannot come
+    // before k µs after the first (a lower bound only: a slow machine takes longer).
+    let mut ticks = TickerTicks::every(Duration::from_ticks(0));
+    embassy_futures::block_on(async {
+        let first = ticks.next_tick().await;
+        let start = std::time::Instant::now();
+        for _ in 0..2000 {
+            ticks.next_tick().await;
+        }
+        let took = start.elapsed();
+        assert!(
+            took >= std::time::Duration::from_micros(1500),
+            "2000 ticks in {took:?} after {first:?}"
+        );
+    });
+}
+
+#[test]
+fn a_ticker_period_past_the_end_of_time_is_held_to_an_hour_instead_of_panicking() {
+    // embassy-time's `Ticker::every` panics when now + period overflows.
+    let mut ticks = TickerTicks::every(Duration::MAX);
+    let tick = embassy_futures::poll_once(ticks.next_tick());
+    assert!(tick.is_pending());
+}
+
+#[test]
+fn a_configuration_that_cannot_run_a_bus_refuses_every_node() {
+    let motor = DjiMotor::m3508(1).unwrap();
+    let ok = BusConfig::DEFAULT;
+    let cases = [
+        (
+            BusConfig {
+                tick_period: Duration::from_ticks(0),
+                ..ok
+            },
+            ConfigError::ZeroTickPeriod,
+            "invalid bus configuration: bus tick period is zero",
+        ),
+        (
+            BusConfig {
+                bitrate_bps: 0,
+                ..ok
+            },
+            ConfigError::Bitrate(0),
+            "invalid bus configuration: bus bitrate 0 bit/s is not in 1..=1000000",
+        ),
+        (
+            BusConfig {
+                bitrate_bps: 2_000_000,
+                ..ok
+            },
+            ConfigError::Bitrate(2_000_000),
+            "invalid bus configuration: bus bitrate 2000000 bit/s is not in 1..=1000000",
+        ),
+        (
+            BusConfig {
+                max_load_percent: 0.0,
+                ..ok
+            },
+            ConfigError::MaxLoad(0.0),
+            "invalid bus configuration: bus load limit 0 % is not above zero",
+        ),
+        (
+            BusConfig {
+                rate_window: Duration::from_ticks(0),
+                ..ok
+            },
+            ConfigError::ZeroRateWindow,
+            "invalid bus configuration: bus rate window is zero",
+        ),
+    ];
+    for (config, error, message) in cases {
+        assert_eq!(config.check(), Err(error));
+        let mut b: BusBuilder<'_, 2> = BusBuilder::with_config(config);
+        let refused = b.register(&motor).unwrap_err();
+        assert_eq!(refused, RegisterError::Config(error));
+        assert_eq!(refused.to_string(), message);
+        assert!(b.build().nodes().is_empty());
+    }
+    // NaN would have compared false against every load and admitted anything.
+    let nan = BusConfig {
+        max_load_percent: f32::NAN,
+        ..ok
+    };
+    assert!(matches!(nan.check(), Err(ConfigError::MaxLoad(x)) if x.is_nan()));
+    let mut b: BusBuilder<'_, 2> = BusBuilder::with_config(nan);
+    assert!(matches!(
+        b.register(&motor),
+        Err(RegisterError::Config(ConfigError::MaxLoad(_)))
+    ));
+}
+
+#[test]
+fn the_edges_of_a_valid_configuration_are_accepted() {
+    // 1 µs ticks, 1 bit/s to 1 Mbit/s, any positive load limit (infinity: none), a 1 µs rate
+    // window, no TX buffers (a listen-only bus).
+    for config in [
+        BusConfig {
+            tick_period: Duration::from_micros(1),
+            rate_window: Duration::from_micros(1),
+            ..BusConfig::DEFAULT
+        },
+        BusConfig {
+            bitrate_bps: 1,
+            ..BusConfig::DEFAULT
+        },
+        BusConfig {
+            bitrate_bps: 1_000_000,
+            max_load_percent: f32::MIN_POSITIVE,
+            ..BusConfig::DEFAULT
+        },
+        BusConfig {
+            max_load_percent: f32::INFINITY,
+            ..BusConfig::DEFAULT
+        },
+        BusConfig::DEFAULT.with_tx_depth(0),
+    ] {
+        assert_eq!(config.check(), Ok(()), "{config:?}");
+    }
+    // No load limit: eight M3508s on one bus (8 feedback + 2 command frames, 111 % of a
+    // 1 Mbit/s millisecond) register; the default 90 % refuses the seventh.
+    let motors: [DjiMotor; 8] = core::array::from_fn(|i| DjiMotor::m3508(i as u8 + 1).unwrap());
+    let unlimited = BusConfig {
+        max_load_percent: f32::INFINITY,
+        ..BusConfig::DEFAULT
+    };
+    let mut b: BusBuilder<'_, 8> = BusBuilder::with_config(unlimited);
+    for m in &motors {
+        b.register(m).unwrap();
+    }
+    assert!((b.budget().nominal_load_percent - 111.0).abs() < 1e-3);
+    // A listen-only bus refuses a node that sends, for its TX depth.
+    let mut b: BusBuilder<'_, 2> = BusBuilder::with_config(BusConfig::DEFAULT.with_tx_depth(0));
+    assert_eq!(
+        b.register(&motors[0]),
+        Err(RegisterError::TxDepth {
+            frames_per_tick: 1,
+            tx_depth: 0
+        })
+    );
 }
 
 /// A node that listens on more IDs than an `IdSet` holds (and sends nothing).
