@@ -11,7 +11,9 @@ use crate::time::Instant;
 use core::fmt;
 
 /// Most frames one tick can pack on one bus. At 1 Mbit/s one millisecond carries at most
-/// nine 8-byte frames, so 16 leaves room for slower ticks without being a real limit.
+/// nine 8-byte frames, so 16 leaves room for ticks up to about 2 ms; registration refuses a
+/// node that would take a bus past it (`RegisterError::TickBatch`), so no node's frames are
+/// left out of the batch every tick.
 pub const MAX_FRAMES_PER_TICK: usize = 16;
 
 /// Most ID filters one [`IdSet`] holds (a VESC listening to all five of its status packets
@@ -282,6 +284,15 @@ impl core::error::Error for FrameError {}
 /// assert_eq!(batch.frames().len(), 1);
 /// assert_eq!(batch.frames()[0].data(), &[0, 0, 0x03, 0xE8, 0, 0, 0xFF, 0xFF]);
 /// ```
+///
+/// A node's [`pack_command`](CanNode::pack_command) gets the batch holding the frames of the
+/// nodes packed before it, and can only add to it: emptying it is the bus's alone.
+///
+/// ```compile_fail
+/// fn pack_command(out: &mut rc10_core::node::TxBatch) {
+///     out.clear(); // would drop every motor packed before this node
+/// }
+/// ```
 #[derive(Debug, Clone)]
 pub struct TxBatch {
     frames: heapless::Vec<CanFrame, MAX_FRAMES_PER_TICK>,
@@ -424,11 +435,12 @@ impl TxBatch {
     /// on an ID outside `sends`, or beyond the first `frames_per_tick` on IDs in it (slot
     /// frames are left alone). Returns how many were dropped. The bus calls this after each node's
     /// `pack_command`, so a node can never send what registration did not check.
+    /// Crate-private: a node must not be able to drop the frames of the nodes packed before it.
     #[allow(
         clippy::arithmetic_side_effects,
         reason = "i < frames.len() ≤ MAX_FRAMES_PER_TICK = 16 (shifts by at most 16 in 32 bits) and dropped ≤ i"
     )]
-    pub fn keep_declared(&mut self, from: usize, frames_per_tick: u8, sends: &IdSet) -> u32 {
+    pub(crate) fn keep_declared(&mut self, from: usize, frames_per_tick: u8, sends: &IdSet) -> u32 {
         let mut whole = 0u8;
         let mut dropped = 0u32;
         let mut i = from;
@@ -473,8 +485,9 @@ impl TxBatch {
         self.overflowed
     }
 
-    /// Empties the batch for the next tick.
-    pub fn clear(&mut self) {
+    /// Empties the batch for the next tick. Crate-private: a node's `pack_command` gets the
+    /// batch with the frames of the nodes packed before it, and must not be able to drop them.
+    pub(crate) fn clear(&mut self) {
         self.frames.clear();
         self.slot_frames = 0;
         self.overflowed = 0;
@@ -533,6 +546,42 @@ pub trait CanNode: Sync {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dropping_an_undeclared_frame_keeps_the_slot_frames_around_it() {
+        // Frames: slot frame 0x200, a whole frame on 0x300 nobody declared, slot frame 0x1FF.
+        let (a0, a1) = (
+            CommandSlot::new(0x200, 0).unwrap(),
+            CommandSlot::new(0x200, 1).unwrap(),
+        );
+        let (b1, b2) = (
+            CommandSlot::new(0x1FF, 1).unwrap(),
+            CommandSlot::new(0x1FF, 2).unwrap(),
+        );
+        let mut batch = TxBatch::new();
+        assert!(batch.write_slot(a0, 100));
+        batch
+            .push(CanFrame::standard(0x300, &[1]).unwrap())
+            .unwrap();
+        assert!(batch.write_slot(b1, 200));
+        assert_eq!(batch.keep_declared(1, 0, &IdSet::EMPTY), 1);
+        assert_eq!(batch.frames().len(), 2);
+        // Both slot frames are still known as such: later slots merge into them.
+        assert!(batch.write_slot(a1, 300));
+        assert!(batch.write_slot(b2, 400));
+        assert_eq!(batch.frames().len(), 2);
+        assert_eq!(batch.frames()[0].raw_id(), 0x200);
+        assert_eq!(batch.frames()[0].data(), &[0, 100, 0x01, 0x2C, 0, 0, 0, 0]);
+        assert_eq!(batch.frames()[1].raw_id(), 0x1FF);
+        assert_eq!(batch.frames()[1].data(), &[0, 0, 0, 200, 0x01, 0x90, 0, 0]);
+        // A whole frame pushed now is checked like any other, not mistaken for a slot frame.
+        batch
+            .push(CanFrame::standard(0x300, &[2]).unwrap())
+            .unwrap();
+        assert_eq!(batch.keep_declared(2, 0, &IdSet::EMPTY), 1);
+        assert_eq!(batch.keep_declared(0, 0, &IdSet::EMPTY), 0);
+        assert_eq!(batch.frames().len(), 2);
+    }
 
     #[test]
     fn command_slot_rejects_out_of_range() {

@@ -100,6 +100,16 @@ impl BusConfig {
     /// The fastest classic CAN bitrate, in bits per second.
     pub const MAX_BITRATE_BPS: u32 = 1_000_000;
 
+    /// The shortest tick period a bus runs at: 100 µs, less than one 8-byte frame takes at
+    /// 1 Mbit/s (111 µs). A shorter tick could not carry a frame per tick, and its work would
+    /// outlast its period, so the scheduler task would never wait on its ticker and never
+    /// let another task of its executor run.
+    pub const MIN_TICK_PERIOD: Duration = Duration::from_micros(100);
+
+    /// The longest tick period a bus runs at: an hour (embassy-time's `Ticker` panics when
+    /// its next tick would overflow the clock).
+    pub const MAX_TICK_PERIOD: Duration = Duration::from_secs(3600);
+
     /// Whether this configuration can run a bus; [`BusBuilder::register`] refuses every node
     /// on a bus whose configuration cannot. A `tx_depth` of 0 is allowed (a bus that only
     /// listens; a node that sends is refused with [`RegisterError::TxDepth`]), and so is an
@@ -110,11 +120,11 @@ impl BusConfig {
     /// use rc10_core::time::Duration;
     /// assert_eq!(BusConfig::DEFAULT.check(), Ok(()));
     /// let zero_tick = BusConfig { tick_period: Duration::from_ticks(0), ..BusConfig::DEFAULT };
-    /// assert_eq!(zero_tick.check(), Err(ConfigError::ZeroTickPeriod));
+    /// assert_eq!(zero_tick.check(), Err(ConfigError::TickPeriod(Duration::from_ticks(0))));
     /// ```
     pub fn check(&self) -> Result<(), ConfigError> {
-        if self.tick_period.as_ticks() == 0 {
-            return Err(ConfigError::ZeroTickPeriod);
+        if !(Self::MIN_TICK_PERIOD..=Self::MAX_TICK_PERIOD).contains(&self.tick_period) {
+            return Err(ConfigError::TickPeriod(self.tick_period));
         }
         if self.bitrate_bps == 0 || self.bitrate_bps > Self::MAX_BITRATE_BPS {
             return Err(ConfigError::Bitrate(self.bitrate_bps));
@@ -122,8 +132,12 @@ impl BusConfig {
         if self.max_load_percent.is_nan() || self.max_load_percent <= 0.0 {
             return Err(ConfigError::MaxLoad(self.max_load_percent));
         }
-        if self.rate_window.as_ticks() == 0 {
-            return Err(ConfigError::ZeroRateWindow);
+        // The window's bit counts are 32-bit differences: a bus carries at most one bit per
+        // bit time in each direction's count.
+        let max_bit_us =
+            u128::from(self.bitrate_bps).saturating_mul(u128::from(self.rate_window.as_micros()));
+        if self.rate_window.as_ticks() == 0 || max_bit_us > u128::from(u32::MAX) * 1_000_000 {
+            return Err(ConfigError::RateWindow(self.rate_window));
         }
         Ok(())
     }
@@ -133,25 +147,36 @@ impl BusConfig {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// `tick_period` is zero: [`run_scheduler`]'s ticker would never wait, and the load
-    /// figures would be for a tick of no length.
-    ZeroTickPeriod,
+    /// `tick_period` (this value) is outside
+    /// [`MIN_TICK_PERIOD`](BusConfig::MIN_TICK_PERIOD)…[`MAX_TICK_PERIOD`](BusConfig::MAX_TICK_PERIOD)
+    /// (100 µs to an hour).
+    TickPeriod(Duration),
     /// `bitrate_bps` (this value) is zero or above classic CAN's 1 Mbit/s.
     Bitrate(u32),
     /// `max_load_percent` (this value) is NaN, zero or negative: NaN would admit any load,
     /// the others none.
     MaxLoad(f32),
-    /// `rate_window` is zero: [`Bus::rates`] would cover a single tick.
-    ZeroRateWindow,
+    /// `rate_window` (this value) is zero, or so long that the bits the bus can carry in it
+    /// overflow [`Bus::rates`]' 32-bit counts (longer than 2³² bit times: 71 minutes at
+    /// 1 Mbit/s), which would read a loaded bus as nearly idle.
+    RateWindow(Duration),
 }
 
 impl fmt::Display for ConfigError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::ZeroTickPeriod => f.write_str("bus tick period is zero"),
+            Self::TickPeriod(period) => write!(
+                f,
+                "bus tick period {} us is not within 100 us to 1 h",
+                period.as_micros()
+            ),
             Self::Bitrate(bps) => write!(f, "bus bitrate {bps} bit/s is not in 1..=1000000"),
             Self::MaxLoad(percent) => write!(f, "bus load limit {percent} % is not above zero"),
-            Self::ZeroRateWindow => f.write_str("bus rate window is zero"),
+            Self::RateWindow(window) => write!(
+                f,
+                "bus rate window {} us is zero or longer than 2^32 bit times",
+                window.as_micros()
+            ),
         }
     }
 }
@@ -257,6 +282,14 @@ pub enum RegisterError {
         /// Frames the transport holds.
         tx_depth: u8,
     },
+    /// With this node the bus would pack `frames_per_tick` command frames every tick, more
+    /// than one tick's [`TxBatch`] holds ([`MAX_FRAMES_PER_TICK`], 16): the nodes packed last
+    /// would never have their frames sent. Possible only with a `tx_depth` above 16 (a
+    /// software queue) and a slow tick. Use another bus.
+    TickBatch {
+        /// Command frames per tick with this node.
+        frames_per_tick: u32,
+    },
     /// With this node the bus would need `load_percent` of its capacity, above
     /// [`BusConfig::max_load_percent`].
     FrameBudget {
@@ -297,6 +330,10 @@ impl fmt::Display for RegisterError {
             } => write!(
                 f,
                 "{frames_per_tick} command frames per tick do not fit {tx_depth} TX buffers"
+            ),
+            Self::TickBatch { frames_per_tick } => write!(
+                f,
+                "{frames_per_tick} command frames per tick do not fit a tick's batch of {MAX_FRAMES_PER_TICK}"
             ),
             Self::FrameBudget { load_percent } => {
                 write!(f, "bus would be {load_percent:.0} % loaded")
@@ -370,7 +407,8 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
     /// frame's ID), no transmission on an ID anyone listens on; against the node itself: no
     /// transmission on an ID it listens on, no whole frame on its own slot frame's ID
     /// ([`RegisterError::SendConflict`] with `existing` its own index); then that all
-    /// command frames of a tick fit [`BusConfig::tx_depth`] and the load fits
+    /// command frames of a tick fit [`BusConfig::tx_depth`] and a tick's batch
+    /// ([`MAX_FRAMES_PER_TICK`]), and the load fits
     /// [`BusConfig::max_load_percent`].
     pub fn register(&mut self, node: &'a dyn CanNode) -> Result<(), RegisterError> {
         self.config.check().map_err(RegisterError::Config)?;
@@ -438,6 +476,11 @@ impl<'a, const N: usize> BusBuilder<'a, N> {
             return Err(RegisterError::TxDepth {
                 frames_per_tick: budget.command_frames_per_tick,
                 tx_depth: self.config.tx_depth,
+            });
+        }
+        if budget.command_frames_per_tick > MAX_FRAMES_PER_TICK as u32 {
+            return Err(RegisterError::TickBatch {
+                frames_per_tick: budget.command_frames_per_tick,
             });
         }
         if budget.nominal_load_percent > self.config.max_load_percent {
@@ -784,15 +827,14 @@ pub struct TickerTicks {
 }
 
 impl TickerTicks {
-    /// The longest period a `TickerTicks` keeps: longer ones tick hourly.
-    pub const MAX_PERIOD: Duration = Duration::from_secs(3600);
-
-    /// Ticks every `period`, held within 1 µs…[`MAX_PERIOD`](Self::MAX_PERIOD). A zero
-    /// period is raised to 1 µs, as [`TickPacer`] raises it: a ticker that never waits would
-    /// never yield, and no other task on its executor would run. The upper bound keeps
-    /// embassy-time's `Ticker` from overflowing its clock (it panics there).
+    /// Ticks every `period`, held within [`BusConfig::MIN_TICK_PERIOD`] (100 µs) and
+    /// [`BusConfig::MAX_TICK_PERIOD`] (an hour), the periods a bus accepts. Below the
+    /// minimum a tick's work would outlast its period: the ticker would always be due, the
+    /// task would never wait, and no other task on its executor would run (a period of 0
+    /// never waits at all). Above the maximum embassy-time's `Ticker` panics on overflowing
+    /// its clock.
     pub fn every(period: Duration) -> Self {
-        let period = period.clamp(Duration::from_micros(1), Self::MAX_PERIOD);
+        let period = period.clamp(BusConfig::MIN_TICK_PERIOD, BusConfig::MAX_TICK_PERIOD);
         Self {
             ticker: embassy_time::Ticker::every(period),
         }
@@ -915,7 +957,9 @@ impl TickPacer {
 /// missed ticks are skipped (counted in `ticks_skipped`), not run back to back.
 ///
 /// The period is the bus's own, so the ticks, the `dt` the controllers get and the load
-/// figures registration checked against ([`BusConfig`]) cannot disagree.
+/// figures registration checked against ([`BusConfig`]) cannot disagree. (A bus whose
+/// configuration fails [`BusConfig::check`] holds no nodes; its ticker keeps to the
+/// accepted periods: [`TickerTicks::every`].)
 pub async fn run_scheduler<T: CanTransmit, const N: usize>(bus: &Bus<'_, N>, tx: T) -> ! {
     let period = bus.config().tick_period;
     run_scheduler_on(bus, tx, TickerTicks::every(period)).await

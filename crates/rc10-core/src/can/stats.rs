@@ -269,7 +269,9 @@ impl BusCounters {
         if s <= 0.0 {
             return BusRates::default();
         }
-        let bits = self.rx_bits.wrapping_add(self.tx_bits) as f32;
+        // Summed in 64 bits: each count fits 32 over a window `BusConfig::check` accepts,
+        // their sum need not.
+        let bits = u64::from(self.rx_bits).saturating_add(u64::from(self.tx_bits)) as f32;
         BusRates {
             rx_frames_per_s: self.rx_frames as f32 / s,
             tx_frames_per_s: self.tx_frames as f32 / s,
@@ -442,6 +444,20 @@ mod tests {
         assert_eq!(r.tx_frames_per_s, 1000.0);
         assert_eq!(r.tx_dropped_per_s, 10.0);
         assert!((r.load_percent - 44.4).abs() < 1e-3);
+    }
+
+    #[test]
+    fn load_over_a_long_window_sums_the_two_directions_without_wrapping() {
+        // 70 minutes at 1 Mbit/s (within the 2^32 bit times a window may last): 3e9 bits
+        // received and 1.2e9 sent are 4.2e9 bits of 4.2e9 bit times, 100 %. Summed in 32 bits
+        // they wrap to about 0.1e9: 2.4 %.
+        let c = BusCounters {
+            rx_bits: 3_000_000_000,
+            tx_bits: 1_200_000_000,
+            ..Default::default()
+        };
+        let r = c.rates(Duration::from_secs(4200), 1_000_000);
+        assert!((r.load_percent - 100.0).abs() < 1e-3, "{r:?}");
     }
 
     #[test]

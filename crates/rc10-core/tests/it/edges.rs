@@ -9,7 +9,7 @@ use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
 use rc10_core::motor::cascade::{Cascade, CascadeConfig, Measured};
 use rc10_core::motor::dji::DjiMotor;
 use rc10_core::motor::{ControlMode, Motor};
-use rc10_core::node::{BusUsage, CanNode, CommandSlot, FrameError, IdSet, TxBatch};
+use rc10_core::node::{BusUsage, CanNode, FrameError, IdSet, TxBatch};
 use rc10_core::pid::{Pid, PidConfig};
 use rc10_core::time::Instant;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -341,42 +341,6 @@ fn default_matches_frame_called_directly_claims_only_declared_ids() {
     assert!(node.matches_frame(&own));
     assert!(!node.matches_frame(&other));
     assert!(!node.matches_frame(&CanFrame::extended(0x321, &[0]).unwrap()));
-}
-
-#[test]
-fn dropping_an_undeclared_frame_keeps_the_slot_frames_around_it() {
-    // Frames: slot frame 0x200, a whole frame on 0x300 nobody declared, slot frame 0x1FF.
-    let (a0, a1) = (
-        CommandSlot::new(0x200, 0).unwrap(),
-        CommandSlot::new(0x200, 1).unwrap(),
-    );
-    let (b1, b2) = (
-        CommandSlot::new(0x1FF, 1).unwrap(),
-        CommandSlot::new(0x1FF, 2).unwrap(),
-    );
-    let mut batch = TxBatch::new();
-    assert!(batch.write_slot(a0, 100));
-    batch
-        .push(CanFrame::standard(0x300, &[1]).unwrap())
-        .unwrap();
-    assert!(batch.write_slot(b1, 200));
-    assert_eq!(batch.keep_declared(1, 0, &IdSet::EMPTY), 1);
-    assert_eq!(batch.frames().len(), 2);
-    // Both slot frames are still known as such: later slots merge into them.
-    assert!(batch.write_slot(a1, 300));
-    assert!(batch.write_slot(b2, 400));
-    assert_eq!(batch.frames().len(), 2);
-    assert_eq!(batch.frames()[0].raw_id(), 0x200);
-    assert_eq!(batch.frames()[0].data(), &[0, 100, 0x01, 0x2C, 0, 0, 0, 0]);
-    assert_eq!(batch.frames()[1].raw_id(), 0x1FF);
-    assert_eq!(batch.frames()[1].data(), &[0, 0, 0, 200, 0x01, 0x90, 0, 0]);
-    // A whole frame pushed now is checked like any other, not mistaken for a slot frame.
-    batch
-        .push(CanFrame::standard(0x300, &[2]).unwrap())
-        .unwrap();
-    assert_eq!(batch.keep_declared(2, 0, &IdSet::EMPTY), 1);
-    assert_eq!(batch.keep_declared(0, 0, &IdSet::EMPTY), 0);
-    assert_eq!(batch.frames().len(), 2);
 }
 
 #[test]
