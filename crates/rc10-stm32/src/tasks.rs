@@ -46,10 +46,12 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 250_000;
 /// the feeding, and the IWDG resets the MCU at its timeout: the motors are commanded again
 /// from a clean start, and go offline-safe (no command) meanwhile.
 ///
-/// A scheduler that stops is seen at the second look after its last tick, so the reset comes
-/// 250–300 ms after it (with [`WATCHDOG_TIMEOUT_US`]); a fault or panic that stops the core
-/// stops the feeding at once, and the reset comes 200–250 ms after it (the last feed was up
-/// to a look earlier). Nominal figures: the IWDG counts the LSI, 32 kHz nominal and
+/// A scheduler that stops (waiting on something that never comes) is seen at the second look
+/// after its last tick, so the reset comes 250–300 ms after it (with
+/// [`WATCHDOG_TIMEOUT_US`]); a task that spins on the higher-priority control executor (an
+/// endless loop in a motor's `update`) starves thread mode and this task with it, and a fault
+/// or panic stops the core: either stops the feeding at once, and the reset comes 200–250 ms
+/// after it (the last feed was up to a look earlier). Nominal figures: the IWDG counts the LSI, 32 kHz nominal and
 /// 29.5–34 kHz over temperature on the G4, so the 250 ms timeout is 235–271 ms. With a
 /// debugger attached, a panic (panic-probe: a HardFault) halts the core for the backtrace,
 /// and the frozen IWDG (below) does not reset it.
