@@ -873,6 +873,81 @@ fn m2006_total_angle_survives_frames_read_late() {
     }
 }
 
+/// Feeds an M2006 at 2400 rotor counts per 1 ms frame (17,578 rpm: `17_578 · 8192 / 60_000`
+/// = 2399.98), frame `k` sent at `k` ms, as `stamps` says each was read (`None`: lost), with
+/// a tick every millisecond; checks the total angle after each frame taken against the true
+/// motion, 2400 counts a millisecond.
+fn m2006_through_a_receive_stall(stamps: &[(u64, Option<u64>)]) {
+    let m = DjiMotor::m2006(1).unwrap();
+    let mut next_tick_ms = 1;
+    for &(k, stamp_us) in stamps {
+        let Some(stamp_us) = stamp_us else { continue };
+        while next_tick_ms * 1000 <= stamp_us {
+            tick(&m, T0 + Duration::from_millis(next_tick_ms));
+            next_tick_ms += 1;
+        }
+        let true_counts = 2400 * k as i64;
+        m.update_feedback(
+            &fb(0x201, true_counts.rem_euclid(8192) as u16, 17_578, 0, 0),
+            T0 + Duration::from_micros(stamp_us),
+        )
+        .unwrap();
+        let expect_deg = (true_counts - 2400) as f64 * 360.0 / 8192.0 / 36.0;
+        let got = f64::from(m.total_angle_deg().unwrap());
+        assert!(
+            (got - expect_deg).abs() < 0.05,
+            "frame {k} (read at {stamp_us} us): {got} vs {expect_deg}"
+        );
+    }
+}
+
+#[test]
+fn a_backlog_read_after_a_receive_stall_counts_no_extra_turn() {
+    // Frames 1–10 read 0.1 ms after they were sent. The receive path then stalls: frames
+    // 11–13 wait in the 3-deep FIFO and are read back to back at 15.6 ms (stamped 4.6, 3.6
+    // and 2.6 ms late), frames 14 and 15 find it full and are lost, frame 16 comes on time.
+    // Frame 11's stamp says 5.5 periods after frame 10; it came one after (the FIFO keeps the
+    // oldest frames). Searching only around 5.5 (4–8 periods), 2400 counts fit 8 periods
+    // best (19,200 against 2400 + 2 · 8192 = 18,784): two rotor turns too many, 20° at the
+    // output, for good.
+    let mut stamps: Vec<(u64, Option<u64>)> = (1..=10).map(|k| (k, Some(k * 1000 + 100))).collect();
+    stamps.extend([(11, Some(15_600)), (12, Some(15_605)), (13, Some(15_610))]);
+    stamps.extend([(14, None), (15, None)]);
+    stamps.extend((16..=30).map(|k| (k, Some(k * 1000 + 100))));
+    m2006_through_a_receive_stall(&stamps);
+}
+
+#[test]
+fn the_first_frame_after_a_backlog_is_timed_from_when_the_backlog_came() {
+    // As above, but the stall lasts until 19.6 ms: frames 14–19 are lost, and frame 20 comes
+    // on time, 0.5 ms after the backlog's late stamps but 7 periods after frame 13 was sent.
+    // Timed from frame 13's stamp (one period, searched in 1–3), its step of 7 · 2400 =
+    // 16,800 counts (416 past two turns) fits 3 periods best as 8608 (416 past one turn):
+    // one turn too few, 10° at the output.
+    let mut stamps: Vec<(u64, Option<u64>)> = (1..=10).map(|k| (k, Some(k * 1000 + 100))).collect();
+    stamps.extend([(11, Some(19_600)), (12, Some(19_605)), (13, Some(19_610))]);
+    stamps.extend((14..=19).map(|k| (k, None)));
+    stamps.extend((20..=40).map(|k| (k, Some(k * 1000 + 100))));
+    m2006_through_a_receive_stall(&stamps);
+}
+
+#[test]
+fn frames_read_at_the_escs_pace_are_timed_by_their_stamps_again() {
+    // After the backlog of the first test (frames 11–13 read at 15.6 ms), the receive path
+    // stays 2.61 ms behind, reading each frame at the ESC's pace (1 ms apart), and frame 15
+    // is lost on the bus. Frame 14 is then taken as read when stamped (16.61 ms: one period
+    // after frame 13's stamp), so frame 16 (18.61 ms) is two periods later, as it is. Timed
+    // from where frame 13 was found to come (13.1 ms), frame 16 would look 4.5 periods late,
+    // and 2 · 2400 = 4800 counts would fit 5 periods best (12,000 against 4800 + 8192):
+    // a turn too many.
+    let mut stamps: Vec<(u64, Option<u64>)> = (1..=10).map(|k| (k, Some(k * 1000 + 100))).collect();
+    stamps.extend([(11, Some(15_600)), (12, Some(15_605)), (13, Some(15_610))]);
+    stamps.push((14, Some(16_610)));
+    stamps.push((15, None));
+    stamps.extend((16..=30).map(|k| (k, Some(k * 1000 + 2_610))));
+    m2006_through_a_receive_stall(&stamps);
+}
+
 #[test]
 fn a_far_future_stamp_does_not_corrupt_the_total_angle() {
     // M3508 at full speed; one frame is stamped an hour ahead. Its timing is not trusted
