@@ -392,21 +392,18 @@ impl Encoder {
 
     /// Feeds one raw reading from a device that reports every `period` exactly (DJI ESCs:
     /// 1 ms), when the receive timestamps may be late (frames stamped when the receiver read
-    /// them, not when they arrived). Returns the interval taken, in whole periods.
+    /// them, not when they arrived).
     ///
     /// `counts_per_period` is the rotor's mean speed over the interval in counts per period;
     /// `gap_periods` the interval measured from the timestamps, in periods. The true interval
     /// is a whole number `m ≥ 1` of periods (the frames in between were lost); it is searched
-    /// within ±2 of the measured gap, and at `m = 1` (the first frame of a backlog read after
-    /// a stalled receive path: the frame after the last one taken, stamped as late as the
-    /// stall was long), and the step `d + k · counts_per_rev` that a whole `m` explains best
-    /// is taken: the rotor position, not the late timestamp, decides. Where two intervals
-    /// explain the reading equally well (the rotor turns a whole number of times in the
-    /// difference: 2048 counts per period for `Δm` = 4, beyond 4096 for smaller ones), the
+    /// within ±2 of the measured gap, and the step `d + k · counts_per_rev` that a whole `m`
+    /// explains best is taken: the rotor position, not the late timestamp, decides. Where two
+    /// intervals explain the reading equally well (the rotor turns a whole number of times in
+    /// the difference: 2048 counts per period for `Δm` = 4, beyond 4096 for smaller ones), the
     /// one nearer the measured gap wins. At low speed, where no choice in the window changes
     /// the turn count, this is [`update_predicted`](Self::update_predicted) with
-    /// `counts_per_period · gap_periods`, and the interval returned is the measured gap
-    /// rounded (at least 1). Non-finite inputs fall back to the half-turn rule (interval 1).
+    /// `counts_per_period · gap_periods`. Non-finite inputs fall back to the half-turn rule.
     ///
     /// ```
     /// use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
@@ -414,7 +411,7 @@ impl Encoder {
     /// enc.update(0).unwrap();
     /// // M2006 at full speed: 2457.6 counts per 1 ms frame. The next frame really came 1 ms
     /// // later, but was read 1.7 ms late: the stamps say 2.7 ms.
-    /// assert_eq!(enc.update_periodic(2458, 2457.6, 2.7), Ok(1));
+    /// enc.update_periodic(2458, 2457.6, 2.7).unwrap();
     /// assert_eq!(enc.total_counts(), 2458);
     /// ```
     pub fn update_periodic(
@@ -422,31 +419,26 @@ impl Encoder {
         raw: u16,
         counts_per_period: f32,
         gap_periods: f32,
-    ) -> Result<u32, EncoderError> {
+    ) -> Result<(), EncoderError> {
         let cpr = self.config.counts_per_rev;
         let (Some(last), true) = (
             self.last_raw,
             counts_per_period.is_finite() && gap_periods.is_finite(),
         ) else {
-            return self.update_predicted(raw, 0.0).map(|()| 1);
+            return self.update_predicted(raw, 0.0);
         };
         if raw >= cpr {
             return Err(EncoderError::OutOfRange { raw });
         }
         let nf = f32::from(cpr);
         let gap = gap_periods.clamp(1.0, 1.0e6);
-        // In [1, 10^6]: gap is clamped.
-        let centre = i64::from(round_clamped(gap));
-        let centre_periods = u32::try_from(centre).unwrap_or(1);
         // At most ±2 periods around the measured gap: the whole window moves the rotor by less
-        // than a quarter turn, so every candidate gives the same turn count. (A backlog's
-        // `m = 1` is not weighed here: the rotor moves too little to tell it.)
+        // than a quarter turn, so every candidate gives the same turn count.
         if counts_per_period.abs() * 4.0 < nf * 0.25 {
-            return self
-                .update_predicted(raw, counts_per_period * gap)
-                .map(|()| centre_periods);
+            return self.update_predicted(raw, counts_per_period * gap);
         }
         let d0 = wrapped_step(raw, last, cpr);
+        let centre = i64::from(round_clamped(gap));
         #[allow(
             clippy::arithmetic_side_effects,
             reason = "centre is within [1, 10^6]: gap is clamped"
@@ -454,20 +446,19 @@ impl Encoder {
         let (first, last_m) = ((centre - 2).max(1), centre + 2);
         // The turn count each candidate gives is monotonic in `m` (every operation of
         // `step_for` is): when the outermost two agree, every candidate gives the same step
-        // and the search below could only return it. A window above 1 also weighs `m = 1`.
+        // and the search below could only return it.
         let ends = (
             step_for(d0, counts_per_period, first, cpr),
             step_for(d0, counts_per_period, last_m, cpr),
         );
-        let one = (first > 1).then(|| step_for(d0, counts_per_period, 1, cpr));
-        let (step, m) = if ends.0 == ends.1 && one.is_none_or(|s| s == ends.0) {
-            (ends.0, centre)
+        let step = if ends.0 == ends.1 {
+            ends.0
         } else {
-            best_step(d0, counts_per_period, gap, (first, last_m), ends, one, cpr)
+            best_step(d0, counts_per_period, gap, (first, last_m), ends, cpr)
         };
         self.total_counts = self.total_counts.saturating_add(step);
         self.last_raw = Some(raw);
-        Ok(u32::try_from(m).unwrap_or(1))
+        Ok(())
     }
 
     /// Homing: declares the present position to be the output-shaft multi-turn angle
@@ -515,50 +506,41 @@ fn step_for(d0: i64, counts_per_period: f32, m: i64, cpr: u16) -> i64 {
     plus_whole_turns(d0, (predicted - to_f32(d0)) / f32::from(cpr), cpr)
 }
 
-/// Of the intervals `first..=last` (in periods), and 1 when `step_at_one` is given, the step
-/// and interval of the one that explains the reading best ([`Encoder::update_periodic`]): the
-/// smallest residual between step and prediction; within [`AMBIGUOUS_COUNTS`] of each other,
-/// the interval nearer the measured `gap`. `end_steps` are the [`step_for`] of `first` and
-/// `last`, and `step_at_one` that of 1, already computed by the caller.
+/// Of the intervals `first..=last` (in periods), the step of the one that explains the reading
+/// best ([`Encoder::update_periodic`]): the smallest residual between step and prediction;
+/// within [`AMBIGUOUS_COUNTS`] of each other, the interval nearer the measured `gap`.
+/// `end_steps` are the [`step_for`] of `first` and `last`, already computed by the caller.
 fn best_step(
     d0: i64,
     counts_per_period: f32,
     gap: f32,
     (first, last): (i64, i64),
     end_steps: (i64, i64),
-    step_at_one: Option<i64>,
     cpr: u16,
-) -> (i64, i64) {
-    let mut best: Option<(f32, f32, i64, i64)> = None; // (residual, distance to gap, step, m)
-    // `m = 1` first when it lies outside the window, then the window.
-    let candidates = step_at_one
-        .map(|step| (1, step))
-        .into_iter()
-        .chain((first..=last).map(|m| {
-            let step = if m == first {
-                end_steps.0
-            } else if m == last {
-                end_steps.1
-            } else {
-                step_for(d0, counts_per_period, m, cpr)
-            };
-            (m, step)
-        }));
-    for (m, step) in candidates {
+) -> i64 {
+    let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
+    for m in first..=last {
+        let step = if m == first {
+            end_steps.0
+        } else if m == last {
+            end_steps.1
+        } else {
+            step_for(d0, counts_per_period, m, cpr)
+        };
         let residual = (to_f32(step) - counts_per_period * to_f32(m)).abs();
         let distance = (to_f32(m) - gap).abs();
         let better = match best {
             None => true,
-            Some((r, d, _, _)) => {
+            Some((r, d, _)) => {
                 residual + AMBIGUOUS_COUNTS < r
                     || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
             }
         };
         if better {
-            best = Some((residual, distance, step, m));
+            best = Some((residual, distance, step));
         }
     }
-    best.map_or((d0, first), |(_, _, step, m)| (step, m))
+    best.map_or(d0, |(_, _, step)| step)
 }
 
 /// Two candidate steps whose fits to a whole number of periods differ by less than this many
@@ -951,39 +933,29 @@ mod tests {
             let mut e = Encoder::new(config).unwrap();
             e.update(from).unwrap();
             let before = e.total_counts();
-            let periods = e.update_periodic(to, counts_per_period, gap).unwrap();
+            e.update_periodic(to, counts_per_period, gap).unwrap();
             let nf = f32::from(counts_per_rev);
             prop_assume!(counts_per_period.abs() * 4.0 >= nf * 0.25);
             let gap = gap.clamp(1.0, 1.0e6);
             let centre = i64::from(round_clamped(gap));
             let d0 = wrapped_step(to, from, counts_per_rev);
             let (first, last) = ((centre - 2).max(1), centre + 2);
-            // The search's reference: every candidate's step computed afresh, 1 first (when
-            // the window does not hold it), then the window.
-            let one = if first > 1 { vec![1] } else { vec![] };
-            let mut best: Option<(f32, f32, i64, i64)> = None;
-            for m in one.into_iter().chain(first..=last) {
+            // The search's reference: every candidate's step computed afresh.
+            let mut best: Option<(f32, f32, i64)> = None;
+            for m in first..=last {
                 let step = step_for(d0, counts_per_period, m, counts_per_rev);
                 let residual = (step as f32 - counts_per_period * m as f32).abs();
                 let distance = (m as f32 - gap).abs();
-                let better = best.is_none_or(|(r, d, _, _)| {
+                let better = best.is_none_or(|(r, d, _)| {
                     residual + AMBIGUOUS_COUNTS < r
                         || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
                 });
                 if better {
-                    best = Some((residual, distance, step, m));
+                    best = Some((residual, distance, step));
                 }
             }
-            let (_, _, expected, m) = best.unwrap();
+            let expected = best.unwrap().2;
             prop_assert_eq!(e.total_counts() - before, expected);
-            // Where every candidate gives the same step, the interval is the measured one.
-            let all_same = (first..=last).all(|m| step_for(d0, counts_per_period, m, counts_per_rev) == expected)
-                && (first == 1 || step_for(d0, counts_per_period, 1, counts_per_rev) == expected);
-            if all_same {
-                prop_assert_eq!(i64::from(periods), centre);
-            } else {
-                prop_assert_eq!(i64::from(periods), m);
-            }
         }
 
         /// Any speed a DJI rotor reaches (±18 000 rpm = ±2457.6 counts per 1 ms frame), any

@@ -480,8 +480,7 @@ impl TxBatch {
         &self.frames
     }
 
-    /// Frames that did not fit since the batch was last emptied (the bus empties it at the
-    /// start of each tick).
+    /// Frames that did not fit since the last [`clear`](Self::clear).
     pub const fn overflowed(&self) -> u32 {
         self.overflowed
     }

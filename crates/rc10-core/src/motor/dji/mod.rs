@@ -27,17 +27,6 @@
 //! of the frame's timestamp: a receiver that stamps frames when it reads them makes a backlog
 //! read after a stalled receive path look fresh, for the tick or so before newer frames come.
 //!
-//! Multi-turn counting with frames read late: the ESC sends every 1 ms, so frames are a whole
-//! number of periods apart, and the encoder takes the interval the rotor's position and
-//! reported speed fit ([`Encoder::update_periodic`]), searched within two periods of the
-//! interval the stamps measure and at one period (the first frame of a backlog read after a
-//! stalled receive path is the frame after the last one taken, however late its stamp). Each
-//! interval is measured from the last frame's arrival as best known: its stamp, or, for a
-//! frame read late, where the interval found puts it; so the first fresh frame after a
-//! backlog is timed from when the backlog came, not from its late stamps. At speed a turn
-//! can still be miscounted when frames are lost *and* the next one is read more than two
-//! periods late: neither its stamp nor one period is then its interval.
-//!
 //! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
 //! with the same command ID into one frame per tick, and slots no motor uses are sent as zero.
 //! Registration rejects two motors that would share a slot or a feedback ID (for example an
@@ -49,7 +38,7 @@ use crate::can::{CanFrame, IdFilter};
 use crate::encoder::{DJI_COUNTS_PER_REV, Encoder, EncoderConfig, GearRatio, Origin};
 use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
 use crate::pid::{PidConfig, PidConfigError};
-use crate::time::{Duration, Instant};
+use crate::time::Instant;
 use core::cell::RefCell;
 use core::fmt;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -337,12 +326,6 @@ struct DjiState {
     pending: bool,
     /// The time of the last tick: feedback stamped well after it is not trusted for timing.
     last_tick: Option<Instant>,
-    /// When the last frame taken arrived, as best known: its stamp, or, for a frame stamped
-    /// more than half a period after the interval the encoder found says it came and not a
-    /// whole number of periods after the frame before (read late, from a backlog), the
-    /// previous arrival plus that interval. The next frame's interval is measured from it,
-    /// so a late stamp does not shorten the next one's.
-    arrival: Option<Instant>,
 }
 
 /// The limit in force: the ESC's `range`, derated, and the user's limit if lower.
@@ -490,7 +473,6 @@ impl DjiMotor {
                 pending_home_deg: None,
                 pending: false,
                 last_tick: None,
-                arrival: None,
             })),
         })
     }
@@ -679,12 +661,13 @@ impl DjiMotor {
         // and hands one over late) is older than the state: unwrapping it against the newer
         // reading could count a turn. (A far-future stamp is clamped to the tick's time at
         // the next tick, so it holds frames back for at most a tick.)
-        if s.liveness
-            .last_feedback()
-            .is_some_and(|newest| now < newest)
-        {
-            return Err(FrameError::OutOfOrder);
-        }
+        let since_newest = match s.liveness.last_feedback() {
+            Some(newest) => match now.checked_duration_since(newest) {
+                Some(since) => Some(since),
+                None => return Err(FrameError::OutOfOrder),
+            },
+            None => None,
+        };
         // The same 8 bytes as the last frame: a copy (CAN repeats a frame when an error hits
         // its last bit), whenever it was read, or a motor at rest reporting the same again.
         // Nothing changes but the time. Unwrapping a copy at speed could count a turn: three
@@ -693,7 +676,6 @@ impl DjiMotor {
         let data = u64::from_ne_bytes(*d);
         if data == s.last_data {
             s.liveness.record_feedback_in_order(now);
-            s.arrival = Some(now);
             return Ok(());
         }
         s.last_data = data;
@@ -706,55 +688,32 @@ impl DjiMotor {
             s.encoder
                 .update(raw_angle)
                 .map_err(|_| FrameError::OutOfRange)?;
-            s.arrival = Some(now);
         } else {
             // Multi-turn counting that survives lost frames at full speed: the ESC sends every
             // 1 ms, so the frames were a whole number of periods apart; the mean reported rotor
             // speed says how far the rotor went in each candidate interval, and the encoder
             // takes the one the reading fits (see `Encoder::update_periodic`). The timestamps
-            // only centre the search, as they may be read late, and the interval is measured
-            // from the last frame's arrival as best known (`arrival`): after a backlog's first
-            // frame, read late but found to follow the last one by a period, the next frame's
-            // interval counts from when that one came, not from its late stamp. A stamp more
-            // than two periods after the last tick is not trusted at all (a bogus or far-future
-            // stamp): the interval is then taken as one period.
+            // only centre the search, as they may be read late. A stamp more than two periods
+            // after the last tick is not trusted at all (a bogus or far-future stamp): the
+            // interval is then taken as one period.
             let trusted = s
                 .last_tick
                 .is_none_or(|tick| now.saturating_duration_since(tick) <= TRUST_AHEAD);
-            // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
-            let gap_us = s.arrival.filter(|_| trusted).map(|a| {
-                u32::try_from(now.saturating_duration_since(a).as_micros()).unwrap_or(u32::MAX)
-            });
-            let gap_periods =
-                gap_us.map_or(1.0, |us| us as f32 * (1.0 / FEEDBACK_PERIOD_US as f32));
+            let gap_periods = match since_newest {
+                Some(gap) if trusted => {
+                    // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
+                    u32::try_from(gap.as_micros()).unwrap_or(u32::MAX) as f32
+                        * (1.0 / FEEDBACK_PERIOD_US as f32)
+                }
+                _ => 1.0,
+            };
             let mean_rotor_rpm = (f32::from(s.rotor_rpm) + f32::from(rotor_rpm)) * 0.5;
             // rpm · 8192 counts/turn · 1000 µs / (60 s/min · 10⁶ µs/s)
             let counts_per_period = mean_rotor_rpm
                 * (f32::from(DJI_COUNTS_PER_REV) * FEEDBACK_PERIOD_US as f32 / 60.0e6);
-            let periods = s
-                .encoder
+            s.encoder
                 .update_periodic(raw_angle, counts_per_period, gap_periods)
                 .map_err(|_| FrameError::OutOfRange)?;
-            // Stamped more than half a period after where the interval the encoder found puts
-            // it, and not read at the ESC's pace (its stamp a whole `periods` after the last
-            // one's, give or take half a period: that also ends an estimate a wrong interval
-            // left behind), the frame was read late: it came where the interval puts it.
-            let period_us = periods.saturating_mul(FEEDBACK_PERIOD_US as u32);
-            let half_us = (FEEDBACK_PERIOD_US / 2) as u32;
-            let late = gap_us.is_some_and(|g| g > period_us.saturating_add(half_us));
-            let paced = || {
-                s.liveness.last_feedback().is_some_and(|last| {
-                    let stamped_us = now.saturating_duration_since(last).as_micros();
-                    stamped_us.abs_diff(u64::from(period_us)) <= u64::from(half_us)
-                })
-            };
-            let came = match s.arrival {
-                Some(last_arrival) if late && !paced() => {
-                    last_arrival.saturating_add(Duration::from_micros(u64::from(period_us)))
-                }
-                _ => now,
-            };
-            s.arrival = Some(came);
         }
         s.rotor_rpm = rotor_rpm;
         s.speed_rpm = f32::from(rotor_rpm) / self.model.gear().as_f32();
