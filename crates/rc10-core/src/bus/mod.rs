@@ -120,64 +120,58 @@ impl BusConfig {
     /// use rc10_core::time::Duration;
     /// assert_eq!(BusConfig::DEFAULT.check(), Ok(()));
     /// let zero_tick = BusConfig { tick_period: Duration::from_ticks(0), ..BusConfig::DEFAULT };
-    /// assert_eq!(zero_tick.check(), Err(ConfigError::TickPeriod(Duration::from_ticks(0))));
+    /// assert_eq!(zero_tick.check(), Err(ConfigError::TickPeriod));
     /// ```
     pub fn check(&self) -> Result<(), ConfigError> {
         if !(Self::MIN_TICK_PERIOD..=Self::MAX_TICK_PERIOD).contains(&self.tick_period) {
-            return Err(ConfigError::TickPeriod(self.tick_period));
+            return Err(ConfigError::TickPeriod);
         }
         if self.bitrate_bps == 0 || self.bitrate_bps > Self::MAX_BITRATE_BPS {
-            return Err(ConfigError::Bitrate(self.bitrate_bps));
+            return Err(ConfigError::Bitrate);
         }
         if self.max_load_percent.is_nan() || self.max_load_percent <= 0.0 {
-            return Err(ConfigError::MaxLoad(self.max_load_percent));
+            return Err(ConfigError::MaxLoad);
         }
         // The window's bit counts are 32-bit differences: a bus carries at most one bit per
         // bit time in each direction's count.
-        let max_bit_us =
-            u128::from(self.bitrate_bps).saturating_mul(u128::from(self.rate_window.as_micros()));
-        if self.rate_window.as_ticks() == 0 || max_bit_us > u128::from(u32::MAX) * 1_000_000 {
-            return Err(ConfigError::RateWindow(self.rate_window));
+        // In bits times 10⁶ (bit/s · µs); the bitrate is at most 10⁶ here.
+        let too_long = u64::from(self.bitrate_bps)
+            .checked_mul(self.rate_window.as_micros())
+            .is_none_or(|bit_us| bit_us > u64::from(u32::MAX) * 1_000_000);
+        if self.rate_window.as_ticks() == 0 || too_long {
+            return Err(ConfigError::RateWindow);
         }
         Ok(())
     }
 }
 
 /// What is wrong with a [`BusConfig`] ([`BusConfig::check`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// `tick_period` (this value) is outside
+    /// `tick_period` is outside
     /// [`MIN_TICK_PERIOD`](BusConfig::MIN_TICK_PERIOD)…[`MAX_TICK_PERIOD`](BusConfig::MAX_TICK_PERIOD)
     /// (100 µs to an hour).
-    TickPeriod(Duration),
-    /// `bitrate_bps` (this value) is zero or above classic CAN's 1 Mbit/s.
-    Bitrate(u32),
-    /// `max_load_percent` (this value) is NaN, zero or negative: NaN would admit any load,
-    /// the others none.
-    MaxLoad(f32),
-    /// `rate_window` (this value) is zero, or so long that the bits the bus can carry in it
-    /// overflow [`Bus::rates`]' 32-bit counts (longer than 2³² bit times: 71 minutes at
-    /// 1 Mbit/s), which would read a loaded bus as nearly idle.
-    RateWindow(Duration),
+    TickPeriod,
+    /// `bitrate_bps` is zero or above classic CAN's 1 Mbit/s.
+    Bitrate,
+    /// `max_load_percent` is NaN, zero or negative: NaN would admit any load, the others
+    /// none.
+    MaxLoad,
+    /// `rate_window` is zero, or so long that the bits the bus can carry in it overflow
+    /// [`Bus::rates`]' 32-bit counts (2³² bit times or more: 71.6 minutes at 1 Mbit/s),
+    /// which would read a loaded bus as nearly idle.
+    RateWindow,
 }
 
 impl fmt::Display for ConfigError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::TickPeriod(period) => write!(
-                f,
-                "bus tick period {} us is not within 100 us to 1 h",
-                period.as_micros()
-            ),
-            Self::Bitrate(bps) => write!(f, "bus bitrate {bps} bit/s is not in 1..=1000000"),
-            Self::MaxLoad(percent) => write!(f, "bus load limit {percent} % is not above zero"),
-            Self::RateWindow(window) => write!(
-                f,
-                "bus rate window {} us is zero or longer than 2^32 bit times",
-                window.as_micros()
-            ),
-        }
+        f.write_str(match self {
+            Self::TickPeriod => "bus tick period is not within 100 us to 1 h",
+            Self::Bitrate => "bus bitrate is not within 1 bit/s to 1 Mbit/s",
+            Self::MaxLoad => "bus load limit is not above zero",
+            Self::RateWindow => "bus rate window is zero or 2^32 bit times or more",
+        })
     }
 }
 

@@ -448,15 +448,14 @@ mod tests {
 
     #[test]
     fn load_over_a_long_window_sums_the_two_directions_without_wrapping() {
-        // 70 minutes at 1 Mbit/s (within the 2^32 bit times a window may last): 3e9 bits
-        // received and 1.2e9 sent are 4.2e9 bits of 4.2e9 bit times, 100 %. Summed in 32 bits
-        // they wrap to about 0.1e9: 2.4 %.
+        // 3.0e9 bits received and 1.3e9 sent over 4300 s at 1 Mbit/s: 4.3e9 bits of 4.3e9 bit
+        // times, 100 %. Summed in 32 bits they wrap past 2^32 to about 5e6: 0.1 %.
         let c = BusCounters {
             rx_bits: 3_000_000_000,
-            tx_bits: 1_200_000_000,
+            tx_bits: 1_300_000_000,
             ..Default::default()
         };
-        let r = c.rates(Duration::from_secs(4200), 1_000_000);
+        let r = c.rates(Duration::from_secs(4300), 1_000_000);
         assert!((r.load_percent - 100.0).abs() < 1e-3, "{r:?}");
     }
 

@@ -211,72 +211,72 @@ fn a_configuration_that_cannot_run_a_bus_refuses_every_node() {
                 tick_period: Duration::from_ticks(0),
                 ..ok
             },
-            ConfigError::TickPeriod(Duration::from_ticks(0)),
-            "invalid bus configuration: bus tick period 0 us is not within 100 us to 1 h",
+            ConfigError::TickPeriod,
+            "invalid bus configuration: bus tick period is not within 100 us to 1 h",
         ),
         (
             BusConfig {
                 tick_period: Duration::from_micros(99),
                 ..ok
             },
-            ConfigError::TickPeriod(Duration::from_micros(99)),
-            "invalid bus configuration: bus tick period 99 us is not within 100 us to 1 h",
+            ConfigError::TickPeriod,
+            "invalid bus configuration: bus tick period is not within 100 us to 1 h",
         ),
         (
             BusConfig {
                 tick_period: Duration::from_micros(3_600_000_001),
                 ..ok
             },
-            ConfigError::TickPeriod(Duration::from_micros(3_600_000_001)),
-            "invalid bus configuration: bus tick period 3600000001 us is not within 100 us to 1 h",
+            ConfigError::TickPeriod,
+            "invalid bus configuration: bus tick period is not within 100 us to 1 h",
         ),
         (
             BusConfig {
                 bitrate_bps: 0,
                 ..ok
             },
-            ConfigError::Bitrate(0),
-            "invalid bus configuration: bus bitrate 0 bit/s is not in 1..=1000000",
+            ConfigError::Bitrate,
+            "invalid bus configuration: bus bitrate is not within 1 bit/s to 1 Mbit/s",
         ),
         (
             BusConfig {
                 bitrate_bps: 1_000_001,
                 ..ok
             },
-            ConfigError::Bitrate(1_000_001),
-            "invalid bus configuration: bus bitrate 1000001 bit/s is not in 1..=1000000",
+            ConfigError::Bitrate,
+            "invalid bus configuration: bus bitrate is not within 1 bit/s to 1 Mbit/s",
         ),
         (
             BusConfig {
                 max_load_percent: 0.0,
                 ..ok
             },
-            ConfigError::MaxLoad(0.0),
-            "invalid bus configuration: bus load limit 0 % is not above zero",
+            ConfigError::MaxLoad,
+            "invalid bus configuration: bus load limit is not above zero",
         ),
         (
             BusConfig {
                 max_load_percent: -5.0,
                 ..ok
             },
-            ConfigError::MaxLoad(-5.0),
-            "invalid bus configuration: bus load limit -5 % is not above zero",
+            ConfigError::MaxLoad,
+            "invalid bus configuration: bus load limit is not above zero",
         ),
         (
             BusConfig {
                 rate_window: Duration::from_ticks(0),
                 ..ok
             },
-            ConfigError::RateWindow(Duration::from_ticks(0)),
-            "invalid bus configuration: bus rate window 0 us is zero or longer than 2^32 bit times",
+            ConfigError::RateWindow,
+            "invalid bus configuration: bus rate window is zero or 2^32 bit times or more",
         ),
         (
             BusConfig {
                 rate_window: too_long_window,
                 ..ok
             },
-            ConfigError::RateWindow(too_long_window),
-            "invalid bus configuration: bus rate window 4294967296 us is zero or longer than 2^32 bit times",
+            ConfigError::RateWindow,
+            "invalid bus configuration: bus rate window is zero or 2^32 bit times or more",
         ),
     ];
     for (config, error, message) in cases {
@@ -292,19 +292,19 @@ fn a_configuration_that_cannot_run_a_bus_refuses_every_node() {
         max_load_percent: f32::NAN,
         ..ok
     };
-    assert!(matches!(nan.check(), Err(ConfigError::MaxLoad(x)) if x.is_nan()));
+    assert_eq!(nan.check(), Err(ConfigError::MaxLoad));
     let mut b: BusBuilder<'_, 2> = BusBuilder::with_config(nan);
     assert!(matches!(
         b.register(&motor),
-        Err(RegisterError::Config(ConfigError::MaxLoad(_)))
+        Err(RegisterError::Config(ConfigError::MaxLoad))
     ));
 }
 
 #[test]
 fn the_edges_of_a_valid_configuration_are_accepted() {
     // Ticks of 100 µs and of an hour, 1 bit/s to 1 Mbit/s, any positive load limit
-    // (infinity: none), a 1 µs rate window and one of exactly 2^32 bit times (2^32 µs at
-    // 1 Mbit/s, 2^32 s at 1 bit/s), no TX buffers (a listen-only bus).
+    // (infinity: none), a 1 µs rate window and one of 2^32 − 1 bit times (2^32 − 1 µs at
+    // 1 Mbit/s, 2^32 − 1 s at 1 bit/s), no TX buffers (a listen-only bus).
     for config in [
         BusConfig {
             tick_period: Duration::from_micros(100),
