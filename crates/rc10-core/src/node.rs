@@ -480,7 +480,8 @@ impl TxBatch {
         &self.frames
     }
 
-    /// Frames that did not fit since the last [`clear`](Self::clear).
+    /// Frames that did not fit since the batch was last emptied (the bus empties it at the
+    /// start of each tick).
     pub const fn overflowed(&self) -> u32 {
         self.overflowed
     }
