@@ -132,9 +132,8 @@ impl BusConfig {
         if self.max_load_percent.is_nan() || self.max_load_percent <= 0.0 {
             return Err(ConfigError::MaxLoad);
         }
-        // The window's bit counts are 32-bit differences: a bus carries at most one bit per
-        // bit time in each direction's count.
-        // In bits times 10⁶ (bit/s · µs); the bitrate is at most 10⁶ here.
+        // The window's bit counts are 32-bit differences, and a bus carries at most one bit
+        // per bit time: bit/s · µs is the window's bit times · 10⁶.
         let too_long = u64::from(self.bitrate_bps)
             .checked_mul(self.rate_window.as_micros())
             .is_none_or(|bit_us| bit_us > u64::from(u32::MAX) * 1_000_000);

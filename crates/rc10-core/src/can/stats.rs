@@ -269,8 +269,8 @@ impl BusCounters {
         if s <= 0.0 {
             return BusRates::default();
         }
-        // Summed in 64 bits: each count fits 32 over a window `BusConfig::check` accepts,
-        // their sum need not.
+        // Summed in 64 bits. Over a window `BusConfig::check` accepts the two fit 32 together
+        // (the bus carries one frame at a time), but any counts may be passed here.
         let bits = u64::from(self.rx_bits).saturating_add(u64::from(self.tx_bits)) as f32;
         BusRates {
             rx_frames_per_s: self.rx_frames as f32 / s,
