@@ -34,7 +34,7 @@
 //! - **Bus-off** recovery is automatic (the driver restarts the controller from its
 //!   interrupt handler); each entry is counted once by the bus.
 
-use crate::status;
+use crate::{StartError, status};
 use core::cell::Cell;
 use core::future::Future;
 use core::num::{NonZeroU8, NonZeroU16};
@@ -43,8 +43,10 @@ use embassy_stm32::can::config::{GlobalFilter, NominalBitTiming, TxBufferMode};
 use embassy_stm32::can::filter::{
     Action, EXTENDED_FILTER_MAX, ExtendedFilter, FilterType, STANDARD_FILTER_MAX, StandardFilter,
 };
+use embassy_stm32::can::util::calc_can_timings;
 use embassy_stm32::can::{CanConfigurator, CanRx, CanTx, Frame};
 use embassy_stm32::pac;
+use embassy_stm32::time::Hertz;
 use embedded_can::Frame as _;
 use rc10_core::can::acceptance::{Fifo, FilterElement, FilterPlan};
 use rc10_core::can::timing::bit_timing;
@@ -63,20 +65,6 @@ pub const TX_BUFFERS: u8 = 3;
 
 /// A filter plan sized for an STM32G4 FDCAN.
 pub type G4FilterPlan = FilterPlan<STANDARD_FILTERS, EXTENDED_FILTERS>;
-
-/// [`start`] was told an instance that is not in configuration: not the peripheral the
-/// configurator was made from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct WrongInstance(pub Instance);
-
-impl core::fmt::Display for WrongInstance {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "{:?} is not the configurator's FDCAN", self.0)
-    }
-}
-
-impl core::error::Error for WrongInstance {}
 
 /// Which FDCAN peripheral (for the registers the driver does not expose).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -127,17 +115,19 @@ impl Instance {
 /// The bit timing is [`rc10_core::can::timing::bit_timing`]'s for that clock: at 1 Mbit/s
 /// from 170 MHz, 10 quanta sampled at 80 % with a jump width of 2 (from 85 MHz, 17 quanta
 /// at 82 %, jump width 3), close to the 78.6 % DJI's RoboMaster boards use. A bitrate no
-/// whole number of 8–25 quanta gives falls back to embassy-stm32's `set_bitrate`.
-///
-/// # Panics
-///
-/// If no bit timing gives `bitrate_bps` from the FDCAN kernel clock (embassy-stm32's
-/// `set_bitrate`). 1 Mbit/s from a 170 MHz or 85 MHz clock works.
+/// whole number of 8–25 quanta gives falls back to embassy-stm32's search
+/// (`can::util::calc_can_timings`: 3 to 10 quanta at 1 Mbit/s, 3 to 17 below, sampled near
+/// 87.5 %; it divides the clock by the bitrate rounding down, so from a clock that is not a
+/// whole multiple of the bitrate its timing is only near it).
 ///
 /// # Errors
 ///
-/// [`WrongInstance`] if `instance` is not in configuration, so cannot be the configurator's
-/// peripheral (a copy-paste slip such as `Instance::Fdcan1` with FDCAN2's configurator would
+/// [`StartError::NoBitTiming`] if neither search finds a timing for `bitrate_bps` from the
+/// FDCAN kernel clock (1 Mbit/s from a 170 MHz or 85 MHz clock works): the configurator is
+/// dropped unstarted. embassy-stm32's own `set_bitrate` would panic there.
+///
+/// [`StartError::WrongInstance`] if `instance` is not in configuration, so cannot be the
+/// configurator's peripheral (a copy-paste slip such as `Instance::Fdcan1` with FDCAN2's configurator would
 /// otherwise read, and clear, another bus's status and message-lost flags); nothing is
 /// started. The check cannot tell two configurators alive at once apart: start each bus
 /// before making the next one's configurator.
@@ -146,28 +136,39 @@ pub fn start(
     instance: Instance,
     plan: &G4FilterPlan,
     bitrate_bps: u32,
-) -> Result<(FdcanTx, FdcanRx), WrongInstance> {
+) -> Result<(FdcanTx, FdcanRx), StartError> {
     let cccr = instance.regs().cccr().read();
     if !status::in_configuration(cccr.init(), cccr.cce()) {
-        return Err(WrongInstance(instance));
+        return Err(StartError::WrongInstance(instance));
     }
-    // rc10's timing (sample point 80 %, the widest jump width); embassy-stm32's own search,
-    // which panics when nothing fits, only when no 8–25 quanta give the bitrate exactly.
-    let timing = bit_timing(instance.kernel_clock_hz(), bitrate_bps).and_then(|t| {
-        Some(NominalBitTiming {
-            prescaler: NonZeroU16::new(t.prescaler)?,
-            seg1: NonZeroU8::new(t.seg1)?,
-            seg2: NonZeroU8::new(t.seg2)?,
-            sync_jump_width: NonZeroU8::new(t.sync_jump_width)?,
+    // rc10's timing (sample point 80 %, the widest jump width); embassy-stm32's own search
+    // only when no 8–25 quanta give the bitrate exactly. Its `set_bitrate` would panic (and
+    // link core::fmt's Debug machinery for its error) when that finds nothing either.
+    let kernel_clock_hz = instance.kernel_clock_hz();
+    let timing = bit_timing(kernel_clock_hz, bitrate_bps)
+        .and_then(|t| {
+            Some(NominalBitTiming {
+                prescaler: NonZeroU16::new(t.prescaler)?,
+                seg1: NonZeroU8::new(t.seg1)?,
+                seg2: NonZeroU8::new(t.seg2)?,
+                sync_jump_width: NonZeroU8::new(t.sync_jump_width)?,
+            })
         })
-    });
-    match timing {
-        Some(timing) => {
-            let config = configurator.config().set_nominal_bit_timing(timing);
-            configurator.set_config(config);
-        }
-        None => configurator.set_bitrate(bitrate_bps),
-    }
+        .or_else(|| {
+            let t = calc_can_timings(Hertz(kernel_clock_hz), bitrate_bps).ok()?;
+            Some(NominalBitTiming {
+                prescaler: t.prescaler,
+                seg1: t.seg1,
+                seg2: t.seg2,
+                sync_jump_width: t.sync_jump_width,
+            })
+        })
+        .ok_or(StartError::NoBitTiming {
+            kernel_clock_hz,
+            bitrate_bps,
+        })?;
+    let config = configurator.config().set_nominal_bit_timing(timing);
+    configurator.set_config(config);
     let config = configurator
         .config()
         .set_tx_buffer_mode(TxBufferMode::Fifo)

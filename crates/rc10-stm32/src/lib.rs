@@ -128,13 +128,27 @@ pub enum StartError {
     Filters(PlanError),
     /// `instance` does not name the configurator's peripheral.
     WrongInstance(can::Instance),
+    /// No bit timing gives the bus's bitrate from the FDCAN kernel clock (see [`can::start`]).
+    NoBitTiming {
+        /// The FDCAN kernel clock, Hz.
+        kernel_clock_hz: u32,
+        /// The bitrate asked for, bit/s.
+        bitrate_bps: u32,
+    },
 }
 
 impl core::fmt::Display for StartError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Filters(e) => write!(f, "{e}"),
-            Self::WrongInstance(i) => write!(f, "{}", can::WrongInstance(*i)),
+            Self::WrongInstance(i) => write!(f, "{i:?} is not the configurator's FDCAN"),
+            Self::NoBitTiming {
+                kernel_clock_hz,
+                bitrate_bps,
+            } => write!(
+                f,
+                "no CAN bit timing gives {bitrate_bps} bit/s from a {kernel_clock_hz} Hz FDCAN clock"
+            ),
         }
     }
 }
@@ -154,5 +168,4 @@ pub fn start_can<const N: usize>(
 ) -> Result<(can::FdcanTx, can::FdcanRx), StartError> {
     let plan = filter_plan(bus).map_err(StartError::Filters)?;
     can::start(configurator, instance, &plan, bus.config().bitrate_bps)
-        .map_err(|can::WrongInstance(i)| StartError::WrongInstance(i))
 }
