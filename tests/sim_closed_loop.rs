@@ -546,3 +546,35 @@ fn a_stalled_receiver_holds_the_speed_integral_instead_of_ramping_the_command() 
         settled.true_rpm
     );
 }
+
+#[test]
+fn multi_turn_angle_survives_a_stalled_receive_path() {
+    // An M2006 in speed mode; the controller's receive path stalls for 4 or 10 ms. The
+    // first frames of the stall wait in the 3-deep FIFO and are read when it ends, stamped
+    // then; the rest are lost. rc10's multi-turn angle must follow the shaft through it:
+    // its lag behind the true angle (the age of the newest frame) is the same after the
+    // stall as before. A turn miscounted is 10° at the output (36:1).
+    use rc10_sim::scenario::Fault;
+    for (rpm, stall_ms) in [(488.0, 4), (488.0, 10), (300.0, 4), (100.0, 10)] {
+        let mut s = scenario("m2006-speed-step");
+        s.duration_ms = 600;
+        s.targets[0].steps = vec![(0, rpm)];
+        s.faults = vec![Fault::RxStall {
+            from_ms: 400,
+            to_ms: 400 + stall_ms,
+        }];
+        let r = run(&s).unwrap();
+        let lag = |t: u64| {
+            let m = r.samples.iter().find(|x| x.t_ms == t).unwrap().motors[0];
+            f64::from(m.measured_total_deg) - m.true_total_deg
+        };
+        // 4 or 10 frames came in the stall; the FIFO kept 3.
+        assert_eq!(r.rx_overruns, stall_ms - 3, "{rpm} rpm");
+        assert!(
+            (lag(599) - lag(399)).abs() < 1.0,
+            "{rpm} rpm, {stall_ms} ms stall: lag {:.2}° before, {:.2}° after",
+            lag(399),
+            lag(599)
+        );
+    }
+}

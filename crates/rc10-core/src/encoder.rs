@@ -392,18 +392,24 @@ impl Encoder {
 
     /// Feeds one raw reading from a device that reports every `period` exactly (DJI ESCs:
     /// 1 ms), when the receive timestamps may be late (frames stamped when the receiver read
-    /// them, not when they arrived).
+    /// them, not when they arrived). Returns the interval the step was taken over, in periods
+    /// (1 for the first reading or non-finite inputs).
     ///
     /// `counts_per_period` is the rotor's mean speed over the interval in counts per period;
     /// `gap_periods` the interval measured from the timestamps, in periods. The true interval
     /// is a whole number `m ≥ 1` of periods (the frames in between were lost); it is searched
-    /// within ±2 of the measured gap, and the step `d + k · counts_per_rev` that a whole `m`
-    /// explains best is taken: the rotor position, not the late timestamp, decides. Where two
-    /// intervals explain the reading equally well (the rotor turns a whole number of times in
-    /// the difference: 2048 counts per period for `Δm` = 4, beyond 4096 for smaller ones), the
-    /// one nearer the measured gap wins. At low speed, where no choice in the window changes
-    /// the turn count, this is [`update_predicted`](Self::update_predicted) with
-    /// `counts_per_period · gap_periods`. Non-finite inputs fall back to the half-turn rule.
+    /// within ±2 of the measured gap and at `m = 1` (the first frame of a backlog, read late
+    /// after a stalled receive path, follows the last one taken however late its stamp), and
+    /// the step `d + k · counts_per_rev` that a whole `m` explains best is taken: the rotor
+    /// position, not the late timestamp, decides. Where two intervals explain the reading
+    /// equally well (within 1/32 of a turn: the rotor turns a whole number of times in their
+    /// difference, e.g. 2048 counts per period for `Δm` = 4), the one nearer the measured gap
+    /// wins (so a frame read late by several periods at such a speed still counts a turn
+    /// wrong). Where every candidate gives the same step (at low speed no candidate changes
+    /// the turn count, and this is [`update_predicted`](Self::update_predicted) with
+    /// `counts_per_period · gap_periods`), the position cannot tell the intervals apart and
+    /// the one returned is the measured gap rounded. Non-finite inputs fall back to the
+    /// half-turn rule.
     ///
     /// ```
     /// use rc10_core::encoder::{Encoder, EncoderConfig, GearRatio};
@@ -411,54 +417,58 @@ impl Encoder {
     /// enc.update(0).unwrap();
     /// // M2006 at full speed: 2457.6 counts per 1 ms frame. The next frame really came 1 ms
     /// // later, but was read 1.7 ms late: the stamps say 2.7 ms.
-    /// enc.update_periodic(2458, 2457.6, 2.7).unwrap();
+    /// assert_eq!(enc.update_periodic(2458, 2457.6, 2.7), Ok(1));
     /// assert_eq!(enc.total_counts(), 2458);
+    /// // The next one was read 4.6 ms late (a stalled receive path): still one period.
+    /// assert_eq!(enc.update_periodic(4916, 2457.6, 5.6), Ok(1));
+    /// assert_eq!(enc.total_counts(), 4916);
     /// ```
     pub fn update_periodic(
         &mut self,
         raw: u16,
         counts_per_period: f32,
         gap_periods: f32,
-    ) -> Result<(), EncoderError> {
+    ) -> Result<u32, EncoderError> {
         let cpr = self.config.counts_per_rev;
         let (Some(last), true) = (
             self.last_raw,
             counts_per_period.is_finite() && gap_periods.is_finite(),
         ) else {
-            return self.update_predicted(raw, 0.0);
+            return self.update_predicted(raw, 0.0).map(|()| 1);
         };
         if raw >= cpr {
             return Err(EncoderError::OutOfRange { raw });
         }
-        let nf = f32::from(cpr);
         let gap = gap_periods.clamp(1.0, 1.0e6);
-        // At most ±2 periods around the measured gap: the whole window moves the rotor by less
-        // than a quarter turn, so every candidate gives the same turn count.
-        if counts_per_period.abs() * 4.0 < nf * 0.25 {
-            return self.update_predicted(raw, counts_per_period * gap);
-        }
-        let d0 = wrapped_step(raw, last, cpr);
-        let centre = i64::from(round_clamped(gap));
+        let centre = round_clamped(gap); // 1 ..= 10^6: gap is clamped
         #[allow(
             clippy::arithmetic_side_effects,
             reason = "centre is within [1, 10^6]: gap is clamped"
         )]
         let (first, last_m) = ((centre - 2).max(1), centre + 2);
+        // Every candidate, from one period to the window's end (`centre + 2 ≤ gap + 2.5`;
+        // over at least four periods, as the window alone spans), moves the rotor by less
+        // than a quarter turn: they all give the same turn count.
+        let spread = if gap > 2.5 { gap + 1.5 } else { 4.0 };
+        if counts_per_period.abs() * spread < f32::from(cpr) * 0.25 {
+            return self
+                .update_predicted(raw, counts_per_period * gap)
+                .map(|()| centre.unsigned_abs());
+        }
+        let d0 = wrapped_step(raw, last, cpr);
         // The turn count each candidate gives is monotonic in `m` (every operation of
-        // `step_for` is): when the outermost two agree, every candidate gives the same step
-        // and the search below could only return it.
-        let ends = (
-            step_for(d0, counts_per_period, first, cpr),
-            step_for(d0, counts_per_period, last_m, cpr),
-        );
-        let step = if ends.0 == ends.1 {
-            ends.0
+        // `step_for` is): when one period and the window's end agree, every candidate gives
+        // the same step and the search below could only return it.
+        let (step, m) = if step_for(d0, counts_per_period, 1, cpr)
+            == step_for(d0, counts_per_period, last_m, cpr)
+        {
+            (step_for(d0, counts_per_period, last_m, cpr), centre)
         } else {
-            best_step(d0, counts_per_period, gap, (first, last_m), ends, cpr)
+            best_step(d0, counts_per_period, gap, (first, last_m), cpr)
         };
         self.total_counts = self.total_counts.saturating_add(step);
         self.last_raw = Some(raw);
-        Ok(())
+        Ok(m.unsigned_abs())
     }
 
     /// Homing: declares the present position to be the output-shaft multi-turn angle
@@ -501,46 +511,42 @@ impl Encoder {
 
 /// The step `d0 + k · cpr` nearest the motion `counts_per_period · m` predicts for an interval
 /// of `m` periods.
-fn step_for(d0: i64, counts_per_period: f32, m: i64, cpr: u16) -> i64 {
-    let predicted = counts_per_period * to_f32(m);
+fn step_for(d0: i64, counts_per_period: f32, m: i32, cpr: u16) -> i64 {
+    let predicted = counts_per_period * m as f32;
     plus_whole_turns(d0, (predicted - to_f32(d0)) / f32::from(cpr), cpr)
 }
 
-/// Of the intervals `first..=last` (in periods), the step of the one that explains the reading
-/// best ([`Encoder::update_periodic`]): the smallest residual between step and prediction;
-/// within [`AMBIGUOUS_COUNTS`] of each other, the interval nearer the measured `gap`.
-/// `end_steps` are the [`step_for`] of `first` and `last`, already computed by the caller.
+/// Of the intervals 1 and `first..=last` (in periods), the step of the one that explains the
+/// reading best ([`Encoder::update_periodic`]), and that interval: the smallest residual
+/// between step and prediction; within [`AMBIGUOUS_COUNTS`] of each other, the interval
+/// nearer the measured `gap`.
 fn best_step(
     d0: i64,
     counts_per_period: f32,
     gap: f32,
-    (first, last): (i64, i64),
-    end_steps: (i64, i64),
+    (first, last): (i32, i32),
     cpr: u16,
-) -> i64 {
-    let mut best: Option<(f32, f32, i64)> = None; // (residual, distance to gap, step)
-    for m in first..=last {
-        let step = if m == first {
-            end_steps.0
-        } else if m == last {
-            end_steps.1
-        } else {
-            step_for(d0, counts_per_period, m, cpr)
-        };
-        let residual = (to_f32(step) - counts_per_period * to_f32(m)).abs();
-        let distance = (to_f32(m) - gap).abs();
-        let better = match best {
-            None => true,
-            Some((r, d, _)) => {
-                residual + AMBIGUOUS_COUNTS < r
-                    || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
-            }
-        };
-        if better {
-            best = Some((residual, distance, step));
+) -> (i64, i32) {
+    // (residual, distance to gap, step, interval); the first candidate always replaces it.
+    let mut best = (f32::INFINITY, f32::INFINITY, d0, 1);
+    let mut m = 1;
+    loop {
+        let step = step_for(d0, counts_per_period, m, cpr);
+        let residual = (to_f32(step) - counts_per_period * m as f32).abs();
+        let distance = (m as f32 - gap).abs();
+        if residual + AMBIGUOUS_COUNTS < best.0
+            || ((residual - best.0).abs() <= AMBIGUOUS_COUNTS && distance < best.1)
+        {
+            best = (residual, distance, step, m);
         }
+        if m >= last {
+            return (best.2, best.3);
+        }
+        // 1, then the window (which may start at 1 itself).
+        #[allow(clippy::arithmetic_side_effects, reason = "m < last ≤ 10^6 + 2")]
+        let next = m + 1;
+        m = if m < first { first } else { next };
     }
-    best.map_or(d0, |(_, _, step)| step)
 }
 
 /// Two candidate steps whose fits to a whole number of periods differ by less than this many
@@ -600,6 +606,63 @@ mod tests {
 
     fn dji(gear: GearRatio) -> Encoder {
         Encoder::new(EncoderConfig::dji(gear)).unwrap()
+    }
+
+    /// M2006 counts per 1 ms frame at `rotor_rpm`: rpm · 8192 / 60 000.
+    fn m2006_counts_per_ms(rotor_rpm: f32) -> f32 {
+        rotor_rpm * 8192.0 / 60_000.0
+    }
+
+    #[test]
+    fn a_frame_read_late_after_a_stall_is_one_period_on() {
+        // M2006 at 17 578 rotor rpm: 2399.9 counts a period. The frame after the last one
+        // taken is read 4.6 ms late (stamps 5.6 periods apart). The window around 5.6
+        // periods (4..8) alone would take 8 periods: 8 · 2399.9 = 19 199 counts, two turns
+        // and 2815 counts, the nearest fit to a reading 2400 on. One period fits exactly.
+        let cpp = m2006_counts_per_ms(17_578.0);
+        let mut e = dji(GearRatio::M2006);
+        e.update(1000).unwrap();
+        assert_eq!(e.update_periodic(3400, cpp, 5.6), Ok(1));
+        assert_eq!(e.total_counts(), 2400);
+        // Read on time after four frames lost (5 periods, stamps 5.05 apart): 5 periods.
+        // 5 · 2399.9 = 11 999.7 counts: one turn and 3808 on.
+        assert_eq!(e.update_periodic(3400 + 3808, cpp, 5.05), Ok(5));
+        assert_eq!(e.total_counts(), 2400 + 12_000);
+    }
+
+    #[test]
+    fn the_low_speed_shortcut_weighs_one_period_too() {
+        // M3508 at 3600 rotor rpm: 491.52 counts a period. Read 8.5 ms late (stamps 9.5
+        // periods apart), a prediction of 9.5 periods (4669 counts, past half a turn) would
+        // take the reading 492 counts on as 492 + 8192 (4 window periods move the rotor less
+        // than a quarter turn, which once let it skip the search). One period fits.
+        let cpp = 3600.0 * 8192.0 / 60_000.0;
+        let mut e = dji(GearRatio::M3508);
+        e.update(0).unwrap();
+        assert_eq!(e.update_periodic(492, cpp, 9.5), Ok(1));
+        assert_eq!(e.total_counts(), 492);
+        // Slow enough that one period and the window's end move the rotor less than a
+        // quarter turn apart: the prediction decides, and the interval is the measured one.
+        let mut e = dji(GearRatio::M3508);
+        e.update(0).unwrap();
+        assert_eq!(e.update_periodic(300, 100.0, 3.0), Ok(3));
+        assert_eq!(e.total_counts(), 300);
+    }
+
+    #[test]
+    fn a_tie_between_one_period_and_the_stamped_gap_goes_to_the_gap() {
+        // M2006 at 15 000 rotor rpm: 2048 counts a period, so 1 and 5 periods both explain a
+        // reading 2048 on (5 periods: one turn and 2048). Frames lost and the reading on time,
+        // or one frame read 4 ms late: the position cannot tell, and the stamps decide, as
+        // before one period was weighed (the documented limit for frames read late). Below
+        // 3.5 periods, one period is in the window itself and the nearer.
+        let cpp = m2006_counts_per_ms(15_000.0);
+        for (gap, periods, counts) in [(5.0, 5, 10_240), (5.4, 5, 10_240), (2.9, 1, 2048)] {
+            let mut e = dji(GearRatio::M2006);
+            e.update(0).unwrap();
+            assert_eq!(e.update_periodic(2048, cpp, gap), Ok(periods), "{gap}");
+            assert_eq!(e.total_counts(), counts, "{gap}");
+        }
     }
 
     #[test]
@@ -917,8 +980,8 @@ mod tests {
             prop_assert!((0.0..360.0).contains(&a));
         }
 
-        /// The shortcut (the outermost candidates agree, so all do) and the search with its
-        /// end steps handed in take the step a search computing every candidate afresh takes,
+        /// The shortcut (one period and the window's end agree, so all candidates do) and the
+        /// search take the step (and interval) a search computing every candidate afresh takes,
         /// for any reading, speed and gap, down to a 2-count encoder.
         #[test]
         fn periodic_shortcut_takes_the_step_the_full_search_takes(
@@ -933,29 +996,40 @@ mod tests {
             let mut e = Encoder::new(config).unwrap();
             e.update(from).unwrap();
             let before = e.total_counts();
-            e.update_periodic(to, counts_per_period, gap).unwrap();
+            let interval = e.update_periodic(to, counts_per_period, gap).unwrap();
             let nf = f32::from(counts_per_rev);
-            prop_assume!(counts_per_period.abs() * 4.0 >= nf * 0.25);
             let gap = gap.clamp(1.0, 1.0e6);
-            let centre = i64::from(round_clamped(gap));
+            let centre = round_clamped(gap);
+            let spread = if gap > 2.5 { gap + 1.5 } else { 4.0 };
+            prop_assume!(counts_per_period.abs() * spread >= nf * 0.25);
             let d0 = wrapped_step(to, from, counts_per_rev);
             let (first, last) = ((centre - 2).max(1), centre + 2);
-            // The search's reference: every candidate's step computed afresh.
-            let mut best: Option<(f32, f32, i64)> = None;
-            for m in first..=last {
+            // The search's reference: every candidate's step computed afresh, one period
+            // first, then the window.
+            let mut best: Option<(f32, f32, i64, i32)> = None;
+            for m in core::iter::once(1).chain(first.max(2)..=last) {
                 let step = step_for(d0, counts_per_period, m, counts_per_rev);
                 let residual = (step as f32 - counts_per_period * m as f32).abs();
                 let distance = (m as f32 - gap).abs();
-                let better = best.is_none_or(|(r, d, _)| {
+                let better = best.is_none_or(|(r, d, _, _)| {
                     residual + AMBIGUOUS_COUNTS < r
                         || ((residual - r).abs() <= AMBIGUOUS_COUNTS && distance < d)
                 });
                 if better {
-                    best = Some((residual, distance, step));
+                    best = Some((residual, distance, step, m));
                 }
             }
-            let expected = best.unwrap().2;
+            let (_, _, expected, m) = best.unwrap();
             prop_assert_eq!(e.total_counts() - before, expected);
+            // Where the ends agree the interval is the measured one (every candidate fits
+            // alike); otherwise the one the search found.
+            if step_for(d0, counts_per_period, 1, counts_per_rev)
+                != step_for(d0, counts_per_period, last, counts_per_rev)
+            {
+                prop_assert_eq!(interval, m.unsigned_abs());
+            } else {
+                prop_assert_eq!(interval, centre.unsigned_abs());
+            }
         }
 
         /// Any speed a DJI rotor reaches (±18 000 rpm = ±2457.6 counts per 1 ms frame), any

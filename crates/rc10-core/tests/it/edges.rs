@@ -255,9 +255,10 @@ fn periodic_step(raw: u16, counts_per_period: f32, gap_periods: f32) -> i64 {
 #[test]
 fn periodic_unwrapping_follows_the_documented_search() {
     // The rule (Encoder::update_periodic): the true interval is a whole m ≥ 1 periods within
-    // ±2 of the measured gap; for each m the step d + k·8192 nearest m·c is a candidate, and
-    // the one nearest its prediction wins; fits within 256 counts of each other are equally
-    // good and then the m nearer the measured gap wins. Worked by hand, 8192 counts per turn.
+    // ±2 of the measured gap, or 1; for each m the step d + k·8192 nearest m·c is a
+    // candidate, and the one nearest its prediction wins; fits within 256 counts of each other
+    // are equally good and then the m nearer the measured gap wins. Worked by hand, 8192
+    // counts per turn.
 
     // Low speed (400 counts/period), 100 periods of silence: 40 000 counts (4.88 turns), of
     // which the reading shows 40 000 mod 8192 = 7232. Every candidate agrees: 40 000.
@@ -276,12 +277,18 @@ fn periodic_unwrapping_follows_the_documented_search() {
     assert_eq!(periodic_step(1040, 3000.0, 10.0), 33_808);
 
     // Equally good fits: 2048 counts/period, reading 6344. m = 3 gives 6344 and m = 7 gives
-    // 14 536, both 200 off their predictions (6144, 14 336). The m nearer the gap wins.
+    // 14 536, both 200 off their predictions (6144, 14 336); m = 1 gives -1848, 3896 off. The
+    // m nearer the gap wins.
     assert_eq!(periodic_step(6344, 2048.0, 5.3), 14_536);
     assert_eq!(periodic_step(6344, 2048.0, 4.7), 6344);
     // 2073 counts/period, reading 6219: m = 3 fits exactly (6219), m = 7 gives 14 411, 100 off
     // 14 511: within 256, so equally good, and 7 is nearer the gap of 5.3.
     assert_eq!(periodic_step(6219, 2073.0, 5.3), 14_411);
+
+    // One period outside the window: 2400 counts/period, stamped 5.6 periods apart (window
+    // 4..8), reading 2400 on. m = 1 fits exactly; the window's best, m = 8 (19 200 predicted,
+    // 18 784 = 2400 + 2·8192 taken), is 416 off.
+    assert_eq!(periodic_step(2400, 2400.0, 5.6), 2400);
 }
 
 #[test]

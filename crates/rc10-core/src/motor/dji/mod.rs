@@ -27,6 +27,19 @@
 //! of the frame's timestamp: a receiver that stamps frames when it reads them makes a backlog
 //! read after a stalled receive path look fresh, for the tick or so before newer frames come.
 //!
+//! Multi-turn counting with frames read late: the ESC sends every 1 ms, so frames are a whole
+//! number of periods apart, and the encoder takes the interval the rotor's position and
+//! reported speed fit ([`Encoder::update_periodic`]), searched within two periods of the
+//! interval the stamps measure and at one period (the first frame of a backlog read after a
+//! stalled receive path follows the last one taken, however late its stamp). Each interval
+//! is measured from the last frame's arrival as best known: its stamp, or, for a frame read
+//! late, where the interval found puts it; so the first frame read on time after a backlog is
+//! timed from when the backlog came, not from its late stamps. Known limits: where one period
+//! and the stamped interval fit the reading alike (within 1/32 of a turn: an M2006 at 15,000
+//! rotor rpm turns once in four periods), the stamped interval is taken, and a frame read
+//! late by that much counts a turn wrong; two stalls that each overflow the FIFO within a few
+//! periods of each other can put the true interval outside the search.
+//!
 //! A motor knows its command ID and slot: the bus merges the slots of all registered DJI motors
 //! with the same command ID into one frame per tick, and slots no motor uses are sent as zero.
 //! Registration rejects two motors that would share a slot or a feedback ID (for example an
@@ -326,6 +339,32 @@ struct DjiState {
     pending: bool,
     /// The time of the last tick: feedback stamped well after it is not trusted for timing.
     last_tick: Option<Instant>,
+    /// How long before its stamp (the liveness record's newest) the last frame taken arrived,
+    /// as best known, µs (see [`arrival_lag_us`]); the next frame's interval is measured from
+    /// that arrival. 0 for a frame read on time.
+    arrival_lag_us: u32,
+}
+
+/// How long before its stamp a frame arrived, as best known, µs: `since_arrival_us` after
+/// the last frame's estimated arrival and `since_newest_us` after that frame's stamp, it came
+/// `periods` feedback periods after it. Stamped more than half a period after where that
+/// interval puts it, and not `periods` (give or take half a period) after the last frame's
+/// stamp, it was read late (a backlog after a stalled receive path; an untrusted stamp): it
+/// came where the interval puts it, and the next frame is timed from there, not from the late
+/// stamp. Otherwise its stamp is the best estimate (0); a stamp read at the ESC's pace also
+/// ends an estimate that a wrong interval left behind.
+fn arrival_lag_us(since_arrival_us: u32, since_newest_us: u32, periods: u32) -> u32 {
+    const PERIOD_US: u32 = FEEDBACK_PERIOD_US as u32;
+    // At most 4·10^6 periods (`Encoder::update_periodic` returns at most 10^6 + 2), so the
+    // interval and half a period more stay below 2^32 and the plain arithmetic is exact.
+    let interval_us = periods.min(4_000_000).wrapping_mul(PERIOD_US);
+    let late = since_arrival_us > interval_us.wrapping_add(PERIOD_US / 2);
+    let paced = since_newest_us.abs_diff(interval_us) <= PERIOD_US / 2;
+    if late && !paced {
+        since_arrival_us.wrapping_sub(interval_us) // > interval_us: late
+    } else {
+        0
+    }
 }
 
 /// The limit in force: the ESC's `range`, derated, and the user's limit if lower.
@@ -473,6 +512,7 @@ impl DjiMotor {
                 pending_home_deg: None,
                 pending: false,
                 last_tick: None,
+                arrival_lag_us: 0,
             })),
         })
     }
@@ -661,13 +701,16 @@ impl DjiMotor {
         // and hands one over late) is older than the state: unwrapping it against the newer
         // reading could count a turn. (A far-future stamp is clamped to the tick's time at
         // the next tick, so it holds frames back for at most a tick.)
-        let since_newest = match s.liveness.last_feedback() {
+        let since_newest_us = match s.liveness.last_feedback() {
+            // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
             Some(newest) => match now.checked_duration_since(newest) {
-                Some(since) => Some(since),
+                Some(since) => Some(u32::try_from(since.as_micros()).unwrap_or(u32::MAX)),
                 None => return Err(FrameError::OutOfOrder),
             },
             None => None,
         };
+        // Since the last frame's arrival as best known.
+        let since_arrival_us = since_newest_us.map(|us| us.saturating_add(s.arrival_lag_us));
         // The same 8 bytes as the last frame: a copy (CAN repeats a frame when an error hits
         // its last bit), whenever it was read, or a motor at rest reporting the same again.
         // Nothing changes but the time. Unwrapping a copy at speed could count a turn: three
@@ -675,6 +718,16 @@ impl DjiMotor {
         // frame, so that after an outage the return policy applies first.)
         let data = u64::from_ne_bytes(*d);
         if data == s.last_data {
+            // A copy read more than half a period after the last frame is taken as the next
+            // frame of a motor at rest, one period on (a repeat read late within a backlog
+            // then puts the estimate a period late, which the encoder's window absorbs).
+            if let (Some(newest_us), Some(arrival_us)) = (since_newest_us, since_arrival_us) {
+                s.arrival_lag_us = if newest_us > FEEDBACK_PERIOD_US as u32 / 2 {
+                    arrival_lag_us(arrival_us, newest_us, 1)
+                } else {
+                    arrival_us // the same arrival, a newer stamp
+                };
+            }
             s.liveness.record_feedback_in_order(now);
             return Ok(());
         }
@@ -688,6 +741,7 @@ impl DjiMotor {
             s.encoder
                 .update(raw_angle)
                 .map_err(|_| FrameError::OutOfRange)?;
+            s.arrival_lag_us = 0;
         } else {
             // Multi-turn counting that survives lost frames at full speed: the ESC sends every
             // 1 ms, so the frames were a whole number of periods apart; the mean reported rotor
@@ -699,21 +753,25 @@ impl DjiMotor {
             let trusted = s
                 .last_tick
                 .is_none_or(|tick| now.saturating_duration_since(tick) <= TRUST_AHEAD);
-            let gap_periods = match since_newest {
-                Some(gap) if trusted => {
-                    // Saturates beyond 2^32 µs (71 min): the offline timeout is long past.
-                    u32::try_from(gap.as_micros()).unwrap_or(u32::MAX) as f32
-                        * (1.0 / FEEDBACK_PERIOD_US as f32)
-                }
+            // Measured from the last frame's arrival as best known.
+            let gap_periods = match since_arrival_us {
+                Some(us) if trusted => us as f32 * (1.0 / FEEDBACK_PERIOD_US as f32),
                 _ => 1.0,
             };
             let mean_rotor_rpm = (f32::from(s.rotor_rpm) + f32::from(rotor_rpm)) * 0.5;
             // rpm · 8192 counts/turn · 1000 µs / (60 s/min · 10⁶ µs/s)
             let counts_per_period = mean_rotor_rpm
                 * (f32::from(DJI_COUNTS_PER_REV) * FEEDBACK_PERIOD_US as f32 / 60.0e6);
-            s.encoder
+            let periods = s
+                .encoder
                 .update_periodic(raw_angle, counts_per_period, gap_periods)
                 .map_err(|_| FrameError::OutOfRange)?;
+            s.arrival_lag_us = match (since_arrival_us, since_newest_us) {
+                (Some(arrival_us), Some(newest_us)) => {
+                    arrival_lag_us(arrival_us, newest_us, periods)
+                }
+                _ => 0,
+            };
         }
         s.rotor_rpm = rotor_rpm;
         s.speed_rpm = f32::from(rotor_rpm) / self.model.gear().as_f32();
@@ -768,6 +826,17 @@ impl CanNode for DjiMotor {
             // `is_some` first: taking a large `Option` copies it even when it is `None`.
             if s.pending {
                 s.apply_pending_configs();
+            }
+            // A stamp after `now` is about to be pulled back to `now`: the estimated arrival
+            // stays where it was (the lag is measured from that stamp), so that a far-future
+            // stamp does not put the next frame's gap as far out.
+            if let Some(ahead) = s
+                .liveness
+                .last_feedback()
+                .and_then(|newest| newest.checked_duration_since(now))
+            {
+                let ahead_us = u32::try_from(ahead.as_micros()).unwrap_or(u32::MAX);
+                s.arrival_lag_us = s.arrival_lag_us.saturating_sub(ahead_us);
             }
             let (went_offline, stale) = s.liveness.check_staleness(health, now, STALE_AFTER);
             if went_offline {
