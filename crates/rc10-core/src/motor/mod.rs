@@ -389,11 +389,26 @@ impl Liveness {
         now: Instant,
         stale_after: Duration,
     ) -> (bool, bool) {
-        let (online, stale) = match self.last_feedback {
+        let (went_offline, stale, _) = self.check_staleness_clamped(health, now, stale_after);
+        (went_offline, stale)
+    }
+
+    /// [`check_staleness`](Self::check_staleness), also returning how far ahead of `now` the
+    /// newest feedback time was, in ticks, when it was clamped to `now` (0 otherwise): for a
+    /// driver that keeps other times relative to it.
+    #[inline(always)]
+    pub(crate) fn check_staleness_clamped(
+        &mut self,
+        health: &HealthConfig,
+        now: Instant,
+        stale_after: Duration,
+    ) -> (bool, bool, u64) {
+        let (online, stale, ahead) = match self.last_feedback {
             // A stamp at `now` or after it (clamped to `now`): fresh.
             Some(t) if t >= now => {
                 self.last_feedback = Some(now);
-                (true, false)
+                // `t ≥ now`: no wrap.
+                (true, false, t.as_ticks().wrapping_sub(now.as_ticks()))
             }
             Some(t) => {
                 // `t < now`: no wrap.
@@ -401,16 +416,17 @@ impl Liveness {
                 (
                     age <= health.offline_timeout.as_ticks(),
                     age > stale_after.as_ticks(),
+                    0,
                 )
             }
-            None => (false, true),
+            None => (false, true, 0),
         };
         let went_offline = self.online && !online;
         if went_offline {
             self.offline_events = self.offline_events.wrapping_add(1);
         }
         self.online = online;
-        (went_offline, stale)
+        (went_offline, stale, ahead)
     }
 
     /// Whether the motor was online at the last check.

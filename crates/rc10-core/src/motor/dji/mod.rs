@@ -51,7 +51,7 @@ use crate::can::{CanFrame, IdFilter};
 use crate::encoder::{DJI_COUNTS_PER_REV, Encoder, EncoderConfig, GearRatio, Origin};
 use crate::node::{BusUsage, CanNode, CommandSlot, FrameError, TxBatch};
 use crate::pid::{PidConfig, PidConfigError};
-use crate::time::Instant;
+use crate::time::{Duration, Instant};
 use core::cell::RefCell;
 use core::fmt;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -827,18 +827,16 @@ impl CanNode for DjiMotor {
             if s.pending {
                 s.apply_pending_configs();
             }
-            // A stamp after `now` is about to be pulled back to `now`: the estimated arrival
-            // stays where it was (the lag is measured from that stamp), so that a far-future
-            // stamp does not put the next frame's gap as far out.
-            if let Some(ahead) = s
-                .liveness
-                .last_feedback()
-                .and_then(|newest| newest.checked_duration_since(now))
-            {
-                let ahead_us = u32::try_from(ahead.as_micros()).unwrap_or(u32::MAX);
+            let (went_offline, stale, ahead) =
+                s.liveness.check_staleness_clamped(health, now, STALE_AFTER);
+            if ahead != 0 {
+                // The newest stamp was after `now` and is pulled back to it: the estimated
+                // arrival stays where it was (the lag is measured from that stamp), so that
+                // a far-future stamp does not put the next frame's gap as far out.
+                let ahead_us = Duration::from_ticks(ahead).as_micros();
+                let ahead_us = u32::try_from(ahead_us).unwrap_or(u32::MAX);
                 s.arrival_lag_us = s.arrival_lag_us.saturating_sub(ahead_us);
             }
-            let (went_offline, stale) = s.liveness.check_staleness(health, now, STALE_AFTER);
             if went_offline {
                 s.awaiting_return = true;
                 s.last_data = u64::MAX;

@@ -1246,3 +1246,32 @@ fn a_backlog_holding_a_repeat_keeps_the_count_exact() {
         );
     }
 }
+
+#[test]
+fn a_stamp_ahead_of_the_tick_does_not_stretch_the_next_gap() {
+    // M2006 at 15 000 rotor rpm: 2048 counts a period, so 1, 5 and 9 periods all fit a step
+    // of 2048 counts (0, 1 and 2 turns more). Frame 50 is stamped 10 ms ahead; the next tick
+    // pulls its time back to the tick's. Frame 51, on time, is 1 period on: timed from that
+    // frame's estimated arrival left where the far stamp put it, it would look 10 periods on
+    // and the tie would go to 9 (two turns).
+    let m = DjiMotor::m2006(1).unwrap();
+    let counts_per_ms = 15_000.0f64 / 60.0 * 8192.0 / 1000.0;
+    for k in 1..=60u64 {
+        let now = T0 + Duration::from_millis(k);
+        tick(&m, now);
+        let counts = (counts_per_ms * k as f64).round() as i64;
+        let stamp = if k == 50 {
+            now + Duration::from_millis(10)
+        } else {
+            now
+        };
+        m.update_feedback(
+            &fb(0x201, counts.rem_euclid(8192) as u16, 15_000, 0, 0),
+            stamp,
+        )
+        .unwrap();
+    }
+    let expect_deg = (counts_per_ms * 59.0).round() * 360.0 / (8192.0 * 36.0);
+    let got = f64::from(m.total_angle_deg().unwrap());
+    assert!((got - expect_deg).abs() < 0.05, "{got} vs {expect_deg}");
+}
