@@ -578,3 +578,64 @@ fn multi_turn_angle_survives_a_stalled_receive_path() {
         );
     }
 }
+
+/// An M3508 in total-angle mode with an integrating angle loop (kp 8 rpm/°, ki 5 rpm/(°·s)):
+/// a 30° step, alone, or with the rotor locked for the first second (a mechanism jammed, a
+/// wheel against a wall). 30° asks 240 rpm of the angle loop, within its 400 rpm limit: only
+/// the speed loop is held at its limit (the full 20 A against a locked rotor).
+fn m3508_angle_step_with_integral(stall_ms: u64) -> Scenario {
+    use rc10_core::motor::dji::DjiConfig;
+    use rc10_core::pid::PidConfig;
+    let mut config = DjiConfig::default_for(DjiModel::M3508);
+    config.cascade.angle = PidConfig::new(8.0, 5.0, 0.0).with_output_limit(400.0);
+    let mut s = scenario("m3508-angle-step");
+    s.motors[0].controller = Controller::Rc10With(config);
+    s.targets[0].kind = TargetKind::TotalAngleDeg;
+    s.targets[0].steps = vec![(0, 0.0), (10, 30.0)];
+    s.faults = if stall_ms > 0 {
+        vec![rc10_sim::scenario::Fault::Stall {
+            motor: 0,
+            from_ms: 0,
+            to_ms: stall_ms,
+        }]
+    } else {
+        Vec::new()
+    };
+    s.duration_ms = stall_ms + 800;
+    s
+}
+
+#[test]
+fn a_jammed_shaft_freed_moves_to_its_angle_as_a_fresh_step_does() {
+    // Locked, the shaft cannot close its 30° error, and the speed loop is held at its limit
+    // the whole time: the angle loop must not integrate that error (5 rpm/(°·s) · 30° · 1 s
+    // would be 150 rpm more speed target to unwind). Freed, the shaft starts from rest with
+    // the same 30° to go as a fresh step: it must move the same way, not overshoot by the
+    // wound-up integral.
+    let peak_over = |r: &RunResult, from_ms: u64| {
+        motor_series(r, 0)
+            .iter()
+            .filter(|(t, _)| *t >= from_ms)
+            .map(|(_, m)| m.true_total_deg - 30.0)
+            .fold(f64::MIN, f64::max)
+    };
+    let fresh = run(&m3508_angle_step_with_integral(0)).unwrap();
+    let freed = run(&m3508_angle_step_with_integral(1000)).unwrap();
+    let (fresh_over, freed_over) = (peak_over(&fresh, 10), peak_over(&freed, 1000));
+    // Still locked at the end of the stall: no motion at all.
+    let at_release = motor_series(&freed, 0)
+        .iter()
+        .find(|(t, _)| *t == 999)
+        .unwrap()
+        .1;
+    assert!(at_release.true_total_deg.abs() < 1e-9);
+    assert!(
+        freed_over < fresh_over + 0.5,
+        "freed after 1 s: {freed_over:.2}° over 30°, a fresh step {fresh_over:.2}°"
+    );
+    // And both end at 30°.
+    for r in [&fresh, &freed] {
+        let end = motor_series(r, 0).last().unwrap().1.true_total_deg;
+        assert!((end - 30.0).abs() < 0.2, "ended at {end}°");
+    }
+}

@@ -12,10 +12,14 @@
 //!   it and the speed loop's anti-windup works against it.
 //! - A feed-forward (command units) is added by the speed loop in speed and angle modes.
 //! - While the feedback is stale ([`Measured::stale`]) both loops hold their integrals.
+//! - While the speed loop's output is held at its limit, the angle loop does not integrate an
+//!   error that would push it further there (the motor cannot follow a higher speed target:
+//!   integrating would only wind the angle loop up, and the angle would overshoot once the
+//!   motor is free); an error the other way still integrates.
 
 use super::ControlMode;
 use crate::math::{saturate, wrap_deg_360};
-use crate::pid::{ErrorMode, Pid, PidConfig, PidConfigError, PidTerms};
+use crate::pid::{ErrorMode, Integrate, Pid, PidConfig, PidConfigError, PidTerms};
 
 /// Gains and structure of a [`Cascade`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -278,13 +282,14 @@ impl Cascade {
                     };
                     // Every `angle_divider` ticks: the general entry point (its finiteness
                     // checks cost nothing that matters here).
+                    let ways = self.angle_may_integrate(m.stale);
                     self.speed_target_rpm = self.angle.output_integrating(
                         self.target,
                         measured,
                         0.0,
                         self.angle_dt_s,
                         f32::INFINITY,
-                        !m.stale,
+                        ways,
                     );
                     self.ticks_since_angle = 0;
                     self.angle_dt_s = 0.0;
@@ -306,6 +311,43 @@ impl Cascade {
         );
         self.applied = true;
         self.output
+    }
+
+    /// Which ways the angle loop may move its integral this step. Neither on stale readings.
+    /// Otherwise not the way that winds it up: when the speed loop held its output at its
+    /// limit last tick, a larger speed target the same way cannot be followed (the motor is
+    /// at its current limit: accelerating, pushing a load it cannot move, stalled), so an
+    /// integral growing towards it would only collect the error the motor cannot close, and
+    /// the angle would overshoot by it once the motor is free again. It may still move the
+    /// other way (unwinding).
+    ///
+    /// A higher speed target moves the speed loop's output with the sign of its `kp` (of its
+    /// `ki` when `kp` is 0); the angle integral moves the speed target one for one.
+    fn angle_may_integrate(&self, stale: bool) -> Integrate {
+        if stale {
+            return Integrate::NOT;
+        }
+        if self.angle.config().ki == 0.0 {
+            // Nothing to integrate (the default angle loops): skip the test.
+            return Integrate::FREELY;
+        }
+        let held = self.speed.last_clamp();
+        if held == 0 {
+            return Integrate::FREELY;
+        }
+        let speed = self.speed.config();
+        let gain = if speed.kp != 0.0 { speed.kp } else { speed.ki };
+        // Exact (`held` is ±1): positive when a higher speed target pushes the output further
+        // into the limit it is held at, negative when a lower one does; 0 when the target
+        // moves nothing (no kp, no ki: feed-forward alone).
+        let into_limit = f32::from(held) * gain;
+        if into_limit > 0.0 {
+            Integrate::NOT_UP
+        } else if into_limit < 0.0 {
+            Integrate::NOT_DOWN
+        } else {
+            Integrate::FREELY
+        }
     }
 }
 
@@ -469,6 +511,143 @@ mod tests {
         }
         c.step(&fresh, 0.001, 20.0);
         assert!((c.speed_target_rpm() - 100.04).abs() < 1e-4);
+    }
+
+    fn angle_cascade() -> Cascade {
+        Cascade::new(CascadeConfig {
+            speed: PidConfig::new(0.1, 10.0, 0.0).with_output_limit(20.0),
+            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
+            angle_divider: 1,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn the_angle_loop_does_not_wind_up_while_the_speed_loop_is_held_at_its_limit() {
+        let mut c = angle_cascade();
+        let still = Measured::default();
+        c.set_target(ControlMode::TotalAngle, 10.0);
+        // First tick: 10° of error, p = 100 rpm, i = 2·10·0.001 = 0.02 rpm. The speed loop
+        // asks 0.1·100.02 = 10 A of a 0.5 A limit: held at +0.5 A.
+        assert_eq!(c.step(&still, 0.001, 0.5), 0.5);
+        assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        // A stalled shaft for 100 ms: integrating would add 0.02 rpm a tick (102 rpm at the
+        // end, and 2 rpm more to unwind once it moves); held, it stays at 100.02.
+        for _ in 0..100 {
+            assert_eq!(c.step(&still, 0.001, 0.5), 0.5);
+            assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        }
+        // The limit lifted: the speed loop is no longer held (0.1·100.02 + 10·100.02·0.001 ≈
+        // 11 A of 20), and integration resumes on the next angle step.
+        c.step(&still, 0.001, 20.0);
+        assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        c.step(&still, 0.001, 20.0);
+        assert!((c.speed_target_rpm() - 100.04).abs() < 1e-4);
+    }
+
+    #[test]
+    fn the_angle_loop_still_integrates_an_error_that_unwinds_the_speed_loop() {
+        let mut c = angle_cascade();
+        // Angle error −10° while the shaft still runs at −1000 rpm: the speed target is
+        // −100.02 rpm, the speed error +899.98 rpm, the speed loop held at +0.5 A. The angle
+        // integral moves the speed target down, the speed loop's output with it: away from
+        // the limit it is held at. It integrates, −0.02 rpm a tick.
+        let running = Measured {
+            speed_rpm: -1000.0,
+            ..Default::default()
+        };
+        c.set_target(ControlMode::TotalAngle, -10.0);
+        for _ in 0..10 {
+            assert_eq!(c.step(&running, 0.001, 0.5), 0.5);
+        }
+        assert!((c.speed_target_rpm() + 100.2).abs() < 1e-4);
+    }
+
+    #[test]
+    fn in_angle_mode_the_hold_follows_the_error_the_short_way_round() {
+        let mut c = angle_cascade();
+        // Target 350°, shaft at 10°: the error is −20° (the short way), not +340°. p = −200
+        // rpm, i = −0.04 rpm; the speed loop asks −20 A of 0.5: held at −0.5 A. Integrating
+        // the −20° error would push it further down: held at −200.04 rpm.
+        let at_10 = Measured {
+            angle_deg: 10.0,
+            ..Default::default()
+        };
+        c.set_target(ControlMode::Angle, 350.0);
+        for _ in 0..20 {
+            assert_eq!(c.step(&at_10, 0.001, 0.5), -0.5);
+            assert!((c.speed_target_rpm() + 200.04).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn the_wind_up_check_follows_a_speed_loop_with_negative_gains() {
+        // A speed loop wired the other way round (negative gains: more speed target, less
+        // command). 10° of error: speed target 100.02 rpm, command −0.1·100.02 ≈ −10 A, held
+        // at −0.5 A; a higher speed target pushes it further down: the integral holds.
+        let mut c = Cascade::new(CascadeConfig {
+            speed: PidConfig::new(-0.1, -10.0, 0.0).with_output_limit(20.0),
+            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
+            angle_divider: 1,
+        })
+        .unwrap();
+        c.set_target(ControlMode::TotalAngle, 10.0);
+        for _ in 0..20 {
+            assert_eq!(c.step(&Measured::default(), 0.001, 0.5), -0.5);
+            assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        }
+        // The mirror: −10°, speed target −100.02 rpm, command +10 A held at +0.5 A; a lower
+        // speed target pushes it further up: the integral holds at −0.02 rpm.
+        c.set_target(ControlMode::Disabled, 0.0);
+        c.set_target(ControlMode::TotalAngle, -10.0);
+        for _ in 0..20 {
+            assert_eq!(c.step(&Measured::default(), 0.001, 0.5), 0.5);
+            assert!((c.speed_target_rpm() + 100.02).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn the_wind_up_check_reads_the_speed_loops_ki_when_it_has_no_kp() {
+        // An I-only speed loop with 1 A of feed-forward against a 0.5 A limit: held at +0.5 A
+        // from the first tick (its integral cannot grow either). A higher speed target would
+        // push it further through ki = 10 > 0: the angle integral holds at 0.02 rpm.
+        let mut c = Cascade::new(CascadeConfig {
+            speed: PidConfig::new(0.0, 10.0, 0.0).with_output_limit(20.0),
+            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
+            angle_divider: 1,
+        })
+        .unwrap();
+        c.set_feed_forward(1.0);
+        c.set_target(ControlMode::TotalAngle, 10.0);
+        for _ in 0..20 {
+            assert_eq!(c.step(&Measured::default(), 0.001, 0.5), 0.5);
+            assert!((c.speed_target_rpm() - 100.02).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn a_speed_loop_without_gains_does_not_stop_the_angle_integral() {
+        // Feed-forward alone (1 A against 0.5 A: held high): the speed target moves nothing,
+        // so the angle loop integrates as usual, 0.02 rpm a tick.
+        let mut c = Cascade::new(CascadeConfig {
+            speed: PidConfig::new(0.0, 0.0, 0.0).with_output_limit(20.0),
+            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
+            angle_divider: 1,
+        })
+        .unwrap();
+        c.set_feed_forward(1.0);
+        c.set_target(ControlMode::TotalAngle, 10.0);
+        for _ in 0..10 {
+            assert_eq!(c.step(&Measured::default(), 0.001, 0.5), 0.5);
+        }
+        assert!((c.speed_target_rpm() - 100.2).abs() < 1e-4);
+        // And the other way: −10°, the integral falls 0.02 rpm a tick.
+        c.set_target(ControlMode::Disabled, 0.0);
+        c.set_target(ControlMode::TotalAngle, -10.0);
+        for _ in 0..10 {
+            assert_eq!(c.step(&Measured::default(), 0.001, 0.5), 0.5);
+        }
+        assert!((c.speed_target_rpm() + 100.2).abs() < 1e-4);
     }
 
     #[test]

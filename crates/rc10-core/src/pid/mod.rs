@@ -19,6 +19,7 @@ mod positional;
 mod td;
 
 pub use incremental::{IncrementalPid, IncrementalPidConfig};
+pub(crate) use positional::Integrate;
 pub use positional::{Pid, PidConfig};
 pub use td::TrackingDifferentiator;
 

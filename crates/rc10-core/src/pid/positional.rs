@@ -182,6 +182,46 @@ enum Path {
     PlainPi,
 }
 
+/// Which ways a step may move the integral: what a cascade asks of its loops. Every loop
+/// holds its integral while readings are stale ([`Integrate::NOT`]); an angle loop also holds
+/// it from growing the way that would push a speed loop held at its limit further into it
+/// ([`Integrate::NOT_UP`], [`Integrate::NOT_DOWN`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Integrate(u8);
+
+impl Integrate {
+    /// Either way (the usual step).
+    pub(crate) const FREELY: Self = Self(Self::AT_ALL);
+    /// Neither way: the integral holds.
+    pub(crate) const NOT: Self = Self(0);
+    /// Down only: the integral does not grow.
+    pub(crate) const NOT_UP: Self = Self(Self::AT_ALL | Self::NO_UP);
+    /// Up only: the integral does not fall.
+    pub(crate) const NOT_DOWN: Self = Self(Self::AT_ALL | Self::NO_DOWN);
+    // Laid out so that a `bool` is already the value `when` gives (no instruction on the
+    // speed loop's path).
+    const AT_ALL: u8 = 1;
+    const NO_UP: u8 = 2;
+    const NO_DOWN: u8 = 4;
+
+    /// [`FREELY`](Self::FREELY) if `integrate`, else [`NOT`](Self::NOT).
+    pub(crate) const fn when(integrate: bool) -> Self {
+        Self(integrate as u8)
+    }
+
+    const fn at_all(self) -> bool {
+        self.0 & Self::AT_ALL != 0
+    }
+
+    const fn up(self) -> bool {
+        self.0 & Self::NO_UP == 0
+    }
+
+    const fn down(self) -> bool {
+        self.0 & Self::NO_DOWN == 0
+    }
+}
+
 /// Whether all three are finite, in a few instructions: `x · 0` is zero for finite `x` and
 /// NaN for ±inf and NaN, and a NaN anywhere makes the sum NaN.
 #[inline]
@@ -324,7 +364,8 @@ impl Pid {
         if !all_finite(target, measurement, feed_forward) {
             return PidTerms::ZERO;
         }
-        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit, true);
+        let ways = Integrate::FREELY;
+        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit, ways);
         self.last
     }
 
@@ -340,12 +381,15 @@ impl Pid {
         dt_s: f32,
         limit: f32,
     ) -> f32 {
-        self.output_integrating(target, measurement, feed_forward, dt_s, limit, true)
+        let ways = Integrate::FREELY;
+        self.output_integrating(target, measurement, feed_forward, dt_s, limit, ways)
     }
 
-    /// [`output_within`](Self::output_within), holding the integral where it is (within the
-    /// limits in force) unless `integrate`: what a cascade runs while its feedback is stale,
-    /// so that the loop does not integrate an error whose measurement no longer changes.
+    /// [`output_within`](Self::output_within), moving the integral only the `ways` allowed
+    /// (otherwise it holds where it is, within the limits in force): what a cascade runs for
+    /// its angle loop, holding it while the feedback is stale (the loop would integrate an
+    /// error whose measurement no longer changes) or from winding up against a speed loop held
+    /// at its limit.
     #[inline]
     pub(crate) fn output_integrating(
         &mut self,
@@ -354,18 +398,18 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
-        integrate: bool,
+        ways: Integrate,
     ) -> f32 {
         if !all_finite(target, measurement, feed_forward) {
             return 0.0;
         }
-        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit, integrate)
+        self.step_finite::<false>(target, measurement, feed_forward, dt_s, limit, ways)
     }
 
     /// [`output_within`](Self::output_within) for a caller that keeps `target` and
     /// `feed_forward` finite itself (the cascade, whose setters refuse anything else): only
     /// `measurement` is checked (a non-finite one returns `0.0` and changes nothing). Unless
-    /// `integrate`, the integral holds (see [`output_integrating`](Self::output_integrating)).
+    /// `integrate`, the integral holds (the speed loop on stale feedback).
     #[inline]
     pub(crate) fn output_within_finite_target(
         &mut self,
@@ -381,7 +425,8 @@ impl Pid {
         }
         // The PI path only here, where the speed loop calls: one more copy of the step in
         // the firmware, not one per entry point.
-        self.step_finite::<true>(target, measurement, feed_forward, dt_s, limit, integrate)
+        let ways = Integrate::when(integrate);
+        self.step_finite::<true>(target, measurement, feed_forward, dt_s, limit, ways)
     }
 
     /// One step for finite `target`, `measurement` and `feed_forward`: updates the state and
@@ -407,15 +452,13 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
-        integrate: bool,
+        ways: Integrate,
     ) -> f32 {
         let (t, m, ff) = (target, measurement, feed_forward);
         match self.path {
-            Path::PlainPi if PI_PATH => self.step_plain::<true>(t, m, ff, dt_s, limit, integrate),
-            Path::PlainPi | Path::Plain => {
-                self.step_plain::<false>(t, m, ff, dt_s, limit, integrate)
-            }
-            Path::General => self.step_general(t, m, ff, dt_s, limit, integrate),
+            Path::PlainPi if PI_PATH => self.step_plain::<true>(t, m, ff, dt_s, limit, ways),
+            Path::PlainPi | Path::Plain => self.step_plain::<false>(t, m, ff, dt_s, limit, ways),
+            Path::General => self.step_general(t, m, ff, dt_s, limit, ways),
         }
     }
 
@@ -435,15 +478,18 @@ impl Pid {
     /// trapezoid mean `(error + prev_error) / 2`, computed as `0.5·error + 0.5·prev_error` so
     /// that two errors of `f32::MAX` stay finite (conditional integration against
     /// `out_limit`).
+    /// With `DIRECTIONAL`, `ways` may also hold it from moving one way (the angle loop's
+    /// steps; the speed loop's PI step, which never gets such a request, skips the test).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn integrate(
+    fn integrate<const DIRECTIONAL: bool>(
         &self,
         error_mean: f32,
         dt_s: f32,
         (p, d, feed_forward): (f32, f32, f32),
         out_limit: f32,
         i_limit: f32,
+        ways: Integrate,
     ) -> f32 {
         // Held within the limit in force (which may have dropped since the last step); a
         // new value below replaces it already clamped.
@@ -459,7 +505,13 @@ impl Pid {
         let growth = candidate - integral;
         let winding_up =
             (unlimited > out_limit && growth > 0.0) || (unlimited < -out_limit && growth < 0.0);
-        if winding_up { integral } else { candidate }
+        let refused =
+            DIRECTIONAL && ((growth > 0.0 && !ways.up()) || (growth < 0.0 && !ways.down()));
+        if winding_up || refused {
+            integral
+        } else {
+            candidate
+        }
     }
 
     /// [`step_finite`](Self::step_finite) for a configuration without deadband, integral
@@ -475,7 +527,7 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
-        integrate: bool,
+        ways: Integrate,
     ) -> f32 {
         let (out_limit, i_limit) = self.limits(feed_forward, limit);
         let c = &self.config;
@@ -492,18 +544,18 @@ impl Pid {
         } else {
             self.plain_derivative(measurement, dt_s, dt_ok)
         };
-        let integral = if dt_ok && integrate && (PI || self.config.ki != 0.0) {
+        let integral = if dt_ok && ways.at_all() && (PI || self.config.ki != 0.0) {
             let prev_error = match self.prev_error {
                 Some(e) => e,
                 None => error,
             };
-            self.integrate(
-                0.5 * error + 0.5 * prev_error,
-                dt_s,
-                (p, d, feed_forward),
-                out_limit,
-                i_limit,
-            )
+            let mean = 0.5 * error + 0.5 * prev_error;
+            let terms = (p, d, feed_forward);
+            if PI {
+                self.integrate::<false>(mean, dt_s, terms, out_limit, i_limit, ways)
+            } else {
+                self.integrate::<true>(mean, dt_s, terms, out_limit, i_limit, ways)
+            }
         } else {
             clamp_abs(self.integral, i_limit)
         };
@@ -569,7 +621,7 @@ impl Pid {
         feed_forward: f32,
         dt_s: f32,
         limit: f32,
-        integrate: bool,
+        ways: Integrate,
     ) -> f32 {
         let (out_limit, i_limit) = self.limits(feed_forward, limit);
         let c = &self.config;
@@ -591,19 +643,20 @@ impl Pid {
 
         let c = &self.config;
         let in_band = raw_error.abs() <= c.integral_separation;
-        let integral = if dt_ok && integrate && c.ki != 0.0 && in_band {
+        let integral = if dt_ok && ways.at_all() && c.ki != 0.0 && in_band {
             // Trapezoid over in-band errors only: right after the error re-enters the band the
             // previous (separated) error is not folded in.
             let prev_error = match self.prev_error {
                 Some(e) => e,
                 None => error,
             };
-            self.integrate(
+            self.integrate::<true>(
                 0.5 * error + 0.5 * prev_error,
                 dt_s,
                 (p, d, feed_forward),
                 out_limit,
                 i_limit,
+                ways,
             )
         } else {
             clamp_abs(self.integral, i_limit)
@@ -643,6 +696,23 @@ impl Pid {
     /// The terms of the most recent accepted step ([`PidTerms::ZERO`] before the first).
     pub const fn last_terms(&self) -> PidTerms {
         self.last
+    }
+
+    /// Which way the last accepted step's output was held at its limit: `1` when the terms
+    /// summed to more than the output (held at `+limit`), `-1` when to less (held at
+    /// `-limit`), `0` when the output is the sum itself (or before the first step, and after
+    /// a reset). Exact: the output is the clamped sum of the same terms. A step refused for
+    /// non-finite input changes nothing, this included.
+    pub(crate) fn last_clamp(&self) -> i8 {
+        let t = &self.last;
+        let sum = sum_terms(t.p, t.i, t.d, t.ff);
+        if sum > t.output {
+            1
+        } else if sum < t.output {
+            -1
+        } else {
+            0
+        }
     }
 
     /// The integral term in output units.
@@ -704,6 +774,48 @@ mod tests {
 
     fn pid(config: PidConfig) -> Pid {
         Pid::new(config).unwrap()
+    }
+
+    #[test]
+    fn a_one_way_hold_stops_the_integral_one_way_only() {
+        // ki 10, 1 unit of error for 1 ms: ±0.01 a step. Plain and general steps alike (a
+        // deadband takes the general one).
+        for config in [
+            PidConfig::new(0.0, 10.0, 0.0),
+            PidConfig::new(0.0, 10.0, 0.0).with_deadband(0.001),
+        ] {
+            let mut p = pid(config);
+            p.output_integrating(1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT_UP);
+            assert_eq!(p.integral(), 0.0);
+            p.output_integrating(-1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT_UP);
+            // Trapezoid from +1 to −1: the mean is 0 for this step; the next falls.
+            p.output_integrating(-1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT_UP);
+            assert!((p.integral() + 0.01).abs() < 1e-7, "{}", p.integral());
+            p.output_integrating(-1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT_DOWN);
+            assert!((p.integral() + 0.01).abs() < 1e-7, "{}", p.integral());
+            p.output_integrating(1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT_DOWN);
+            p.output_integrating(1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT_DOWN);
+            assert!(p.integral().abs() < 1e-7, "{}", p.integral());
+            p.output_integrating(1.0, 0.0, 0.0, DT, f32::INFINITY, Integrate::NOT);
+            assert!(p.integral().abs() < 1e-7, "{}", p.integral());
+        }
+    }
+
+    #[test]
+    fn the_last_clamp_says_which_way_the_output_was_held() {
+        let mut p = pid(PidConfig::new(1.0, 0.0, 0.0).with_output_limit(5.0));
+        assert_eq!(p.last_clamp(), 0);
+        p.update(3.0, 0.0, DT);
+        assert_eq!(p.last_clamp(), 0);
+        p.update(8.0, 0.0, DT);
+        assert_eq!(p.last_clamp(), 1);
+        p.update(-8.0, 0.0, DT);
+        assert_eq!(p.last_clamp(), -1);
+        // Exactly at the limit is not held.
+        p.update(5.0, 0.0, DT);
+        assert_eq!(p.last_clamp(), 0);
+        p.reset();
+        assert_eq!(p.last_clamp(), 0);
     }
 
     #[test]
@@ -1083,14 +1195,14 @@ mod tests {
                 } else if integrate {
                     plain.update_within(target, meas, ff, dt, limit)
                 } else {
-                    prop_assert_eq!(plain.output_integrating(target, meas, ff, dt, limit, false), 0.0);
+                    prop_assert_eq!(plain.output_integrating(target, meas, ff, dt, limit, Integrate::NOT), 0.0);
                     PidTerms::ZERO
                 };
                 let b = if integrate {
                     general.update_within(target, meas, ff, dt, limit)
                 } else {
                     let before = general.integral;
-                    let out = general.output_integrating(target, meas, ff, dt, limit, false);
+                    let out = general.output_integrating(target, meas, ff, dt, limit, Integrate::NOT);
                     if !(target.is_finite() && meas.is_finite()) {
                         prop_assert_eq!(out, 0.0);
                         PidTerms::ZERO
@@ -1106,6 +1218,44 @@ mod tests {
                 general.path = plain.path;
                 prop_assert_eq!(plain, general);
                 general.path = Path::General;
+            }
+        }
+
+        #[test]
+        fn one_way_holds_match_on_both_steps_and_never_move_the_integral_the_held_way(
+            kp in -1e3f32..1e3, ki in -1e3f32..1e3, kd in prop_oneof![Just(0.0f32), -1.0f32..1.0],
+            out_limit in prop_oneof![Just(f32::INFINITY), 0.0f32..1e3],
+            circular in proptest::bool::ANY,
+            steps in proptest::collection::vec(
+                (-1e4f32..1e4, -1e4f32..1e4, -1e2f32..1e2, 1e-4f32..1e-2,
+                 prop_oneof![Just(f32::INFINITY), 0.0f32..1e3], 0usize..4),
+                1..48),
+        ) {
+            let mode = if circular { ErrorMode::DEGREES } else { ErrorMode::Linear };
+            let config = PidConfig::new(kp, ki, kd).with_output_limit(out_limit).with_error_mode(mode);
+            let mut plain = pid(config);
+            let mut general = plain;
+            general.path = Path::General;
+            let all = [Integrate::FREELY, Integrate::NOT, Integrate::NOT_UP, Integrate::NOT_DOWN];
+            for (target, meas, ff, dt, limit, k) in steps {
+                let ways = all[k];
+                let (_, i_limit) = plain.limits(ff, limit);
+                let before = clamp_abs(plain.integral, i_limit);
+                // The angle loop's entry point: the plain step without the PI shortcut.
+                let a = plain.output_integrating(target, meas, ff, dt, limit, ways);
+                let b = general.output_integrating(target, meas, ff, dt, limit, ways);
+                prop_assert_eq!(a.to_bits(), b.to_bits());
+                prop_assert_eq!(plain.integral.to_bits(), general.integral.to_bits());
+                if !ways.up() {
+                    prop_assert!(plain.integral <= before, "{} rose from {}", plain.integral, before);
+                }
+                if !ways.down() {
+                    prop_assert!(plain.integral >= before, "{} fell from {}", plain.integral, before);
+                }
+                // Held exactly when the terms summed past the output.
+                let t = plain.last_terms();
+                let sum = sum_terms(t.p, t.i, t.d, t.ff);
+                prop_assert_eq!(plain.last_clamp(), (sum > t.output) as i8 - (sum < t.output) as i8);
             }
         }
 
