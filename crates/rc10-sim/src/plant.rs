@@ -586,7 +586,7 @@ impl DjiEsc {
 
     /// The feedback frame the ESC sends now (DJI layout, all quantised as the real ESC does).
     pub fn feedback_frame(&self) -> Option<CanFrame> {
-        let p = self.params;
+        let p = &self.params;
         let counts = encoder_counts(self.rotor_angle / TAU * 8192.0);
         let rotor_rpm = round_to_i16(self.omega * p.gear_ratio * 60.0 / TAU);
         let current_raw = round_to_i16(self.current / p.feedback_amps_per_raw);
