@@ -476,12 +476,7 @@ mod tests {
 
     #[test]
     fn stale_readings_hold_both_integrals_while_everything_else_acts() {
-        let mut c = Cascade::new(CascadeConfig {
-            speed: PidConfig::new(0.1, 10.0, 0.0).with_output_limit(20.0),
-            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
-            angle_divider: 1,
-        })
-        .unwrap();
+        let mut c = angle_cascade();
         let fresh = Measured::default();
         let stale = Measured {
             stale: true,
@@ -513,13 +508,18 @@ mod tests {
         assert!((c.speed_target_rpm() - 100.04).abs() < 1e-4);
     }
 
-    fn angle_cascade() -> Cascade {
+    /// An integrating angle loop (kp 10, ki 2, ±300 rpm) run every tick over `speed`.
+    fn angle_cascade_over(speed: PidConfig) -> Cascade {
         Cascade::new(CascadeConfig {
-            speed: PidConfig::new(0.1, 10.0, 0.0).with_output_limit(20.0),
+            speed: speed.with_output_limit(20.0),
             angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
             angle_divider: 1,
         })
         .unwrap()
+    }
+
+    fn angle_cascade() -> Cascade {
+        angle_cascade_over(PidConfig::new(0.1, 10.0, 0.0))
     }
 
     #[test]
@@ -585,12 +585,7 @@ mod tests {
         // A speed loop wired the other way round (negative gains: more speed target, less
         // command). 10° of error: speed target 100.02 rpm, command −0.1·100.02 ≈ −10 A, held
         // at −0.5 A; a higher speed target pushes it further down: the integral holds.
-        let mut c = Cascade::new(CascadeConfig {
-            speed: PidConfig::new(-0.1, -10.0, 0.0).with_output_limit(20.0),
-            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
-            angle_divider: 1,
-        })
-        .unwrap();
+        let mut c = angle_cascade_over(PidConfig::new(-0.1, -10.0, 0.0));
         c.set_target(ControlMode::TotalAngle, 10.0);
         for _ in 0..20 {
             assert_eq!(c.step(&Measured::default(), 0.001, 0.5), -0.5);
@@ -611,12 +606,7 @@ mod tests {
         // An I-only speed loop with 1 A of feed-forward against a 0.5 A limit: held at +0.5 A
         // from the first tick (its integral cannot grow either). A higher speed target would
         // push it further through ki = 10 > 0: the angle integral holds at 0.02 rpm.
-        let mut c = Cascade::new(CascadeConfig {
-            speed: PidConfig::new(0.0, 10.0, 0.0).with_output_limit(20.0),
-            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
-            angle_divider: 1,
-        })
-        .unwrap();
+        let mut c = angle_cascade_over(PidConfig::new(0.0, 10.0, 0.0));
         c.set_feed_forward(1.0);
         c.set_target(ControlMode::TotalAngle, 10.0);
         for _ in 0..20 {
@@ -629,12 +619,7 @@ mod tests {
     fn a_speed_loop_without_gains_does_not_stop_the_angle_integral() {
         // Feed-forward alone (1 A against 0.5 A: held high): the speed target moves nothing,
         // so the angle loop integrates as usual, 0.02 rpm a tick.
-        let mut c = Cascade::new(CascadeConfig {
-            speed: PidConfig::new(0.0, 0.0, 0.0).with_output_limit(20.0),
-            angle: PidConfig::new(10.0, 2.0, 0.0).with_output_limit(300.0),
-            angle_divider: 1,
-        })
-        .unwrap();
+        let mut c = angle_cascade_over(PidConfig::new(0.0, 0.0, 0.0));
         c.set_feed_forward(1.0);
         c.set_target(ControlMode::TotalAngle, 10.0);
         for _ in 0..10 {
