@@ -32,6 +32,11 @@
 //! total-angle target set before the outage stays in force. After a `Restart` set it again:
 //! should it now lie outside the reachable ±`p_max`, the motor holds where it is rather than
 //! run to the end of the range.
+//!
+//! The single-turn angle and the angle mode's way to its target come from the reported
+//! position and the wraps counted modulo a turn: exact however long the output spins. The
+//! multi-turn total is an f32, whose resolution coarsens as it grows (values 1° apart beyond
+//! about 23 000 turns).
 
 use super::{
     ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,
@@ -350,6 +355,11 @@ struct DmState {
     status: DmStatus,
     position_rad: Option<f32>,
     wraps: i32,
+    /// The frame offset (`wraps` of 2·`p_max` plus `home_offset_rad`) modulo one output turn,
+    /// in 2⁻⁶⁴ of a turn: the single-turn angle and the angle mode's error come from this,
+    /// exact over any number of wraps (the f32 multi-turn position spaces its values 4° apart
+    /// after 40 000 wraps of the factory ±12.5 rad).
+    turn_offset: TurnFraction,
     /// Went offline; the next feedback applies the return policy.
     awaiting_return: bool,
     velocity_rad_s: f32,
@@ -382,6 +392,80 @@ impl DmState {
     fn total_position_rad(&self, p_max: f32) -> f32 {
         self.position_rad.unwrap_or(0.0) + self.frame_offset_rad(p_max)
     }
+
+    /// The output's position after homing within one turn, degrees, `[0, 360)`: the reported
+    /// position plus the frame offset modulo a turn, both small, so exact to f32 resolution
+    /// however many wraps the count holds.
+    fn single_turn_deg(&self) -> f32 {
+        wrap_deg_360(rad_to_deg(
+            self.position_rad.unwrap_or(0.0) + self.turn_offset.to_rad(),
+        ))
+    }
+
+    /// Counts one wrap of the reported position, `forward` (from +`p_max` to −`p_max`) or
+    /// back. The count saturates (a wrap every second for 68 years); the turn offset moves
+    /// only with it.
+    fn count_wrap(&mut self, forward: bool, wrap: TurnFraction) {
+        let wraps = if forward {
+            self.wraps.checked_add(1)
+        } else {
+            self.wraps.checked_sub(1)
+        };
+        if let Some(wraps) = wraps {
+            self.wraps = wraps;
+            self.turn_offset = if forward {
+                self.turn_offset.plus(wrap)
+            } else {
+                self.turn_offset.minus(wrap)
+            };
+        }
+    }
+}
+
+/// A fraction of a turn in units of 2⁻⁶⁴ turn, added and subtracted modulo one turn: a sum of
+/// any number of them is exact (u64 arithmetic wraps exactly where the circle does).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct TurnFraction(u64);
+
+impl TurnFraction {
+    const ZERO: Self = Self(0);
+
+    /// `2·p_max` (one wrap of the reported position) modulo a turn. `p_max` ≥ π is finite
+    /// (checked by [`DmMotor::new`]); worked out in f64: for the factory 12.5 rad the
+    /// fraction is within 2⁻⁵¹ turn, so even 2³¹ wraps (the count's limit) add up to less
+    /// than 2⁻²⁰ turn (6 µrad) of error.
+    const fn of_wrap(p_max_rad: f32) -> Self {
+        let turns = 2.0 * p_max_rad as f64 / core::f64::consts::TAU;
+        // turns ≥ 1 and below 2⁶⁴: the truncation is its whole part, and the fraction
+        // (exact in f64) is in [0, 1).
+        let fraction = turns - (turns as u64) as f64;
+        Self((fraction * 18_446_744_073_709_551_616.0) as u64)
+    }
+
+    /// An angle in radians modulo a turn, to f32 resolution (24 bits of a turn).
+    fn from_rad(angle_rad: f32) -> Self {
+        // [0, 1) (a value rounding up to exactly 1 turn would shift out: 0, the same point).
+        let turns = crate::math::wrap_positive(angle_rad / TAU, 1.0);
+        Self(((turns * 4_294_967_296.0) as u64) << 32)
+    }
+
+    /// The fraction in radians, `[0, 2π)` (its top 24 bits: f32 resolution).
+    fn to_rad(self) -> f32 {
+        (self.0 >> 40) as f32 * (TAU / 16_777_216.0)
+    }
+
+    const fn plus(self, other: Self) -> Self {
+        Self(self.0.wrapping_add(other.0))
+    }
+
+    const fn minus(self, other: Self) -> Self {
+        Self(self.0.wrapping_sub(other.0))
+    }
+
+    /// `self` times `n`, modulo a turn: exact.
+    const fn times(self, n: i32) -> Self {
+        Self(self.0.wrapping_mul(n as i64 as u64))
+    }
 }
 
 /// A Damiao motor in MIT mode on a CAN bus.
@@ -396,6 +480,8 @@ impl DmState {
 pub struct DmMotor {
     can_id: u16,
     config: DmConfig,
+    /// One wrap of the reported position (2·`p_max`) modulo a turn.
+    wrap_turn: TurnFraction,
     state: Mutex<CriticalSectionRawMutex, RefCell<DmState>>,
 }
 
@@ -426,6 +512,7 @@ impl DmMotor {
         Ok(Self {
             can_id,
             config,
+            wrap_turn: TurnFraction::of_wrap(l.p_max_rad),
             state: Mutex::new(RefCell::new(DmState {
                 mode: ControlMode::Disabled,
                 target: 0.0,
@@ -434,6 +521,7 @@ impl DmMotor {
                 status: DmStatus::Disabled,
                 position_rad: None,
                 wraps: 0,
+                turn_offset: TurnFraction::ZERO,
                 awaiting_return: false,
                 velocity_rad_s: 0.0,
                 torque_nm: 0.0,
@@ -563,10 +651,7 @@ impl DmMotor {
                 let position_rad = if s.mode == ControlMode::Angle {
                     // The shortest way round, or if that crosses ±p_max, the same output
                     // angle a whole turn the other way (p_max ≥ π, so one of them is in range).
-                    let error_rad = deg_to_rad(wrap_signed(
-                        s.target - rad_to_deg(s.total_position_rad(p_max)),
-                        360.0,
-                    ));
+                    let error_rad = deg_to_rad(wrap_signed(s.target - s.single_turn_deg(), 360.0));
                     let short = motor_now + error_rad;
                     if short > p_max {
                         short - TAU
@@ -641,14 +726,16 @@ impl CanNode for DmMotor {
                 s.awaiting_return = false;
                 if self.config.health.on_return == MultiTurnOnReturn::Restart {
                     s.position_rad = None;
+                    // The homing offset stays: only the wraps leave the turn offset.
+                    s.turn_offset = s.turn_offset.minus(self.wrap_turn.times(s.wraps));
                     s.wraps = 0;
                 }
             }
             if let Some(prev) = s.position_rad {
                 if p - prev > l.p_max_rad {
-                    s.wraps = s.wraps.saturating_sub(1);
+                    s.count_wrap(false, self.wrap_turn);
                 } else if prev - p > l.p_max_rad {
-                    s.wraps = s.wraps.saturating_add(1);
+                    s.count_wrap(true, self.wrap_turn);
                 }
             }
             s.position_rad = Some(p);
@@ -690,6 +777,7 @@ impl CanNode for DmMotor {
                     // first reading after the new zero.
                     s.wraps = 0;
                     s.home_offset_rad = 0.0;
+                    s.turn_offset = TurnFraction::ZERO;
                     s.position_rad = None;
                     s.hold_rad = None;
                 }
@@ -704,6 +792,10 @@ impl CanNode for DmMotor {
                 let p_max = self.config.limits.p_max_rad;
                 s.home_offset_rad = 0.0;
                 s.home_offset_rad = deg_to_rad(deg) - s.total_position_rad(p_max);
+                // Within a turn from small values (the angle asked for, modulo a turn, less
+                // the reported position): exact however many wraps there were.
+                let here = s.position_rad.unwrap_or(0.0);
+                s.turn_offset = TurnFraction::from_rad(deg_to_rad(wrap_deg_360(deg)) - here);
                 s.pending_home_deg = None;
             }
             // The hold of an out-of-reach total-angle target: the position where it went out
@@ -842,7 +934,7 @@ impl Motor for DmMotor {
                 mode: s.mode,
                 target: s.target,
                 speed_rpm: s.velocity_rad_s * 60.0 / TAU,
-                angle_deg: has_position.then(|| wrap_deg_360(total_deg)),
+                angle_deg: has_position.then(|| s.single_turn_deg()),
                 total_angle_deg: has_position.then_some(total_deg),
                 current_amps: None,
                 temperature_c: match (s.rotor_temp_c, s.mos_temp_c) {
@@ -1539,6 +1631,158 @@ mod tests {
             (p - (2.0 + core::f32::consts::FRAC_PI_2)).abs() < 2e-3,
             "p = {p}"
         );
+    }
+
+    /// The code a DM4310 (default ±12.5 rad, 16 bits) reports at a true multi-turn output
+    /// position, truncated as the motor's own float-to-uint does, and the multi-turn position
+    /// that code stands for (its field value plus the whole 25 rad wraps), worked in f64.
+    fn code_at(total_rad: f64) -> (u16, f64) {
+        let wraps = ((total_rad + 12.5) / 25.0).floor();
+        let field = total_rad - wraps * 25.0; // [-12.5, 12.5)
+        let code = ((field + 12.5) * 65535.0 / 25.0).floor() as u16;
+        (code, f64::from(code) * 25.0 / 65535.0 - 12.5 + wraps * 25.0)
+    }
+
+    /// How far apart two angles are on the circle, degrees.
+    fn circle_gap_deg(a: f64, b: f64) -> f64 {
+        let d = (a - b).rem_euclid(360.0);
+        d.min(360.0 - d)
+    }
+
+    /// Spins `m` from `from_rad` by `turns_rad` (either way) in steps of 5 rad (well under the
+    /// 12.5 rad an unwrap can tell apart), calling `check` with the multi-turn position each
+    /// reading stands for.
+    fn spin(m: &DmMotor, from_rad: f64, turns_rad: f64, mut check: impl FnMut(f64)) -> f64 {
+        let steps = (turns_rad.abs() / 5.0).ceil() as u64;
+        let mut at = from_rad;
+        for k in 1..=steps {
+            at = from_rad + turns_rad * k as f64 / steps as f64;
+            let (code, reported) = code_at(at);
+            m.update_feedback(&feedback(1, 1, code, 0x7FF, 0x7FF, 30, 30), T0)
+                .unwrap();
+            check(reported);
+        }
+        at
+    }
+
+    #[test]
+    fn the_single_turn_angle_stays_exact_over_any_number_of_wraps() {
+        // 40 000 wraps of the 25 rad field forward (1 000 000 rad, 159 000 output turns),
+        // then 30 000 back. The multi-turn f32 total is 57 million degrees
+        // there, 4° between adjacent f32 values: a single-turn angle worked out from it was
+        // off by 5°. Worked out from the wraps modulo a turn it stays within the f32
+        // resolution of a single turn (the 16-bit field itself resolves 0.022°).
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let mut worst: f64 = 0.0;
+        let mut check = |reported: f64| {
+            let expect_deg = reported.rem_euclid(core::f64::consts::TAU).to_degrees();
+            let angle = f64::from(m.angle_deg().unwrap());
+            assert!((0.0..360.0).contains(&angle), "{angle}");
+            worst = worst.max(circle_gap_deg(angle, expect_deg));
+        };
+        let at = spin(&m, 0.0, 1.0e6, &mut check);
+        let end = spin(&m, at, -7.5e5, &mut check);
+        assert!(worst < 1e-3, "worst {worst}°");
+        // The total stays as close as its f32 can be.
+        let total = f64::from(m.total_angle_deg().unwrap());
+        let (_, reported) = code_at(end);
+        assert!((total - reported.to_degrees()).abs() < 8.0, "{total}");
+    }
+
+    #[test]
+    fn an_angle_target_after_many_wraps_is_sent_as_exactly_as_at_the_start() {
+        // After 20 000 wraps forward, angle targets all round the circle: the position field
+        // sent is the reading plus the shortest way to the target (worked in f64 from the
+        // reading the code stands for), to within one code (25/65535 rad).
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let at = spin(&m, 0.0, 5.0e5 + 0.3, |_| {});
+        let (code, reported) = code_at(at);
+        let field = f64::from(code) * 25.0 / 65535.0 - 12.5;
+        let here_deg = reported.rem_euclid(core::f64::consts::TAU).to_degrees();
+        for target_deg in [0.0f64, 17.0, 90.0, 179.0, 181.0, 270.0, 359.5] {
+            m.set_target_angle_deg(target_deg as f32).unwrap();
+            let mut way_deg = (target_deg - here_deg).rem_euclid(360.0);
+            if way_deg >= 180.0 {
+                way_deg -= 360.0;
+            }
+            let mut expect = field + way_deg.to_radians();
+            // Beyond the field's ±12.5 rad: the same angle a turn the other way.
+            if expect > 12.5 {
+                expect -= core::f64::consts::TAU;
+            } else if expect < -12.5 {
+                expect += core::f64::consts::TAU;
+            }
+            let sent = f64::from(packed_position_rad(&packed(&m, T0)));
+            assert!(
+                (sent - expect).abs() < 25.0 / 65535.0 + 1e-6,
+                "target {target_deg}°: sent {sent} rad, expected {expect} rad"
+            );
+        }
+    }
+
+    #[test]
+    fn homing_after_many_wraps_holds_its_angle_through_a_restart_return() {
+        // Homed to 30° after 12 000 wraps, turned on by 2 rad, then offline and back under
+        // `Restart` (the wraps forgotten, the homing offset kept): the single-turn angle is
+        // 30° plus the turn since homing, then the homing offset applied to the returning
+        // reading alone.
+        let mut cfg = DmConfig::new(0x11);
+        cfg.health = cfg.health.with_on_return(MultiTurnOnReturn::Restart);
+        let m = DmMotor::new(0x01, cfg).unwrap();
+        let at = spin(&m, 0.0, 3.0e5 + 1.0, |_| {});
+        let (_, homed_at) = code_at(at);
+        m.set_total_angle_here_deg(30.0).unwrap();
+        m.update(T0, 0.001); // the tick applies it
+        let angle = f64::from(m.angle_deg().unwrap());
+        assert!(circle_gap_deg(angle, 30.0) < 1e-3, "{angle}");
+        let at = spin(&m, at, 2.0, |_| {});
+        let (_, now) = code_at(at);
+        let expect = 30.0 + (now - homed_at).to_degrees();
+        let angle = f64::from(m.angle_deg().unwrap());
+        assert!(circle_gap_deg(angle, expect) < 1e-3, "{angle} vs {expect}");
+
+        // Silent past the 100 ms timeout, then back reading code 0x4000 under `Restart`: the
+        // total is that field plus the homing offset, 30° − (the position homed at).
+        m.update(Instant::from_millis(157), 0.001);
+        assert!(!m.is_online());
+        let back = f64::from(0x4000u16) * 25.0 / 65535.0 - 12.5;
+        m.update_feedback(
+            &feedback(1, 1, 0x4000, 0x7FF, 0x7FF, 30, 30),
+            Instant::from_millis(160),
+        )
+        .unwrap();
+        let expect = 30.0 + (back - homed_at).to_degrees();
+        let angle = f64::from(m.angle_deg().unwrap());
+        assert!(circle_gap_deg(angle, expect) < 1e-3, "{angle} vs {expect}");
+    }
+
+    #[test]
+    fn a_saturated_wrap_count_leaves_the_turn_offset_where_it_is() {
+        // At the count's limit (2³¹ wraps: a wrap a second for 68 years) a further wrap is
+        // not counted, and the turn offset, which moves only with the count, stays.
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            for (wraps, forward) in [(i32::MAX, true), (i32::MIN, false)] {
+                s.wraps = wraps;
+                s.turn_offset = TurnFraction(12345);
+                s.count_wrap(forward, m.wrap_turn);
+                assert_eq!((s.wraps, s.turn_offset), (wraps, TurnFraction(12345)));
+                // One short of the limit it still counts, and the offset moves by a wrap.
+                s.wraps = if forward { wraps - 1 } else { wraps + 1 };
+                s.count_wrap(forward, m.wrap_turn);
+                assert_eq!(s.wraps, wraps);
+                let moved = if forward {
+                    12345u64.wrapping_add(m.wrap_turn.0)
+                } else {
+                    12345u64.wrapping_sub(m.wrap_turn.0)
+                };
+                assert_eq!(s.turn_offset, TurnFraction(moved));
+            }
+        });
+        // 25 rad is 3.9789 turns: 0.9789 of a turn in 2⁻⁶⁴ units (to the f64 it is worked in).
+        let fraction = m.wrap_turn.0 as f64 / 18_446_744_073_709_551_616.0;
+        assert!((fraction - (25.0 / core::f64::consts::TAU - 3.0)).abs() < 1e-15);
     }
 
     #[test]
