@@ -355,10 +355,10 @@ struct DmState {
     status: DmStatus,
     position_rad: Option<f32>,
     wraps: i32,
-    /// The frame offset (`wraps` of 2·`p_max` plus `home_offset_rad`) modulo one output turn,
-    /// in 2⁻⁶⁴ of a turn: the single-turn angle and the angle mode's error come from this,
-    /// exact over any number of wraps (the f32 multi-turn position spaces its values 4° apart
-    /// after 40 000 wraps of the factory ±12.5 rad).
+    /// The frame offset ([`frame_offset_rad`](Self::frame_offset_rad)) modulo one output
+    /// turn, in 2⁻⁶⁴ of a turn: the single-turn angle and the angle mode's error come from
+    /// this, exact over any number of wraps (the f32 multi-turn position in radians spaces its
+    /// values 0.0625 rad apart after 40 000 wraps of the factory ±12.5 rad).
     turn_offset: TurnFraction,
     /// Went offline; the next feedback applies the return policy.
     awaiting_return: bool,
@@ -369,7 +369,10 @@ struct DmState {
     liveness: Liveness,
     /// Feed-forward torque added in speed and angle modes, N·m.
     feed_forward_nm: f32,
-    /// Software homing: added to the motor's own position, rad.
+    /// Software homing: the wrap count it was made at (the total counts wraps from there)…
+    home_wraps: i32,
+    /// …and the angle asked for less the position then, rad: both small, so a homing made
+    /// after many wraps reads its angle exactly, not as the difference of two large f32s.
     home_offset_rad: f32,
     pending_home_deg: Option<f32>,
     /// Ticks without feedback until the next Enable probe (auto-enable).
@@ -385,7 +388,9 @@ impl DmState {
     /// What the MIT position field's frame (the motor's reported, wrapping position) must be
     /// shifted by to give the output's multi-turn position after homing, rad.
     fn frame_offset_rad(&self, p_max: f32) -> f32 {
-        self.wraps as f32 * 2.0 * p_max + self.home_offset_rad
+        // Both counts are i32: their difference fits an i64.
+        let wraps = i64::from(self.wraps).wrapping_sub(i64::from(self.home_wraps));
+        wraps as f32 * 2.0 * p_max + self.home_offset_rad
     }
 
     /// The output's multi-turn position after homing, rad.
@@ -428,6 +433,7 @@ impl DmState {
 struct TurnFraction(u64);
 
 impl TurnFraction {
+    /// No fraction of a turn.
     const ZERO: Self = Self(0);
 
     /// `2·p_max` (one wrap of the reported position) modulo a turn. `p_max` ≥ π is finite
@@ -444,7 +450,7 @@ impl TurnFraction {
 
     /// An angle in radians modulo a turn, to f32 resolution (24 bits of a turn).
     fn from_rad(angle_rad: f32) -> Self {
-        // [0, 1) (a value rounding up to exactly 1 turn would shift out: 0, the same point).
+        // [0, 1): below 2³² when scaled.
         let turns = crate::math::wrap_positive(angle_rad / TAU, 1.0);
         Self(((turns * 4_294_967_296.0) as u64) << 32)
     }
@@ -454,10 +460,12 @@ impl TurnFraction {
         (self.0 >> 40) as f32 * (TAU / 16_777_216.0)
     }
 
+    /// `self + other`, modulo a turn.
     const fn plus(self, other: Self) -> Self {
         Self(self.0.wrapping_add(other.0))
     }
 
+    /// `self − other`, modulo a turn.
     const fn minus(self, other: Self) -> Self {
         Self(self.0.wrapping_sub(other.0))
     }
@@ -529,6 +537,7 @@ impl DmMotor {
                 rotor_temp_c: None,
                 liveness: Liveness::NEW,
                 feed_forward_nm: 0.0,
+                home_wraps: 0,
                 home_offset_rad: 0.0,
                 pending_home_deg: None,
                 probe_in: PROBE_TICKS - 1,
@@ -776,6 +785,7 @@ impl CanNode for DmMotor {
                     // Before the homing below: a homing asked for with it waits for the
                     // first reading after the new zero.
                     s.wraps = 0;
+                    s.home_wraps = 0;
                     s.home_offset_rad = 0.0;
                     s.turn_offset = TurnFraction::ZERO;
                     s.position_rad = None;
@@ -789,13 +799,12 @@ impl CanNode for DmMotor {
                 && !s.awaiting_return
                 && s.position_rad.is_some()
             {
-                let p_max = self.config.limits.p_max_rad;
-                s.home_offset_rad = 0.0;
-                s.home_offset_rad = deg_to_rad(deg) - s.total_position_rad(p_max);
-                // Within a turn from small values (the angle asked for, modulo a turn, less
-                // the reported position): exact however many wraps there were.
-                let here = s.position_rad.unwrap_or(0.0);
-                s.turn_offset = TurnFraction::from_rad(deg_to_rad(wrap_deg_360(deg)) - here);
+                // From small values only (the angle asked for less the reported position, and
+                // the same within a turn): exact however many wraps there were.
+                let here_rad = s.position_rad.unwrap_or(0.0);
+                s.home_wraps = s.wraps;
+                s.home_offset_rad = deg_to_rad(deg) - here_rad;
+                s.turn_offset = TurnFraction::from_rad(deg_to_rad(wrap_deg_360(deg)) - here_rad);
                 s.pending_home_deg = None;
             }
             // The hold of an out-of-reach total-angle target: the position where it went out
@@ -1259,6 +1268,8 @@ mod tests {
         packed(&m, T0);
         let total = m.total_angle_deg().unwrap();
         assert!((total - 90.0).abs() < 0.01, "{total}");
+        let angle = f64::from(m.angle_deg().unwrap());
+        assert!(circle_gap_deg(angle, 90.0) < 0.01, "{angle}");
     }
 
     #[test]
@@ -1293,13 +1304,17 @@ mod tests {
         m.set_total_angle_here_deg(100.0).unwrap();
         packed(&m, T0);
         assert!((m.total_angle_deg().unwrap() - 100.0).abs() < 0.01);
+        assert!(circle_gap_deg(f64::from(m.angle_deg().unwrap()), 100.0) < 0.01);
         m.send_special(DmSpecial::SaveZero);
         assert_eq!(packed(&m, T0), special(0xFE));
-        // The motor now reports about 0 (code 0x7FFF: −0.0002 rad): so does the driver.
+        // The motor now reports about 0 (code 0x7FFF: −0.0002 rad): so does the driver, in the
+        // multi-turn total and within a turn (neither the wrap nor the homing is left).
         m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
         let total = m.total_angle_deg().unwrap();
         assert!(total.abs() < 0.1, "{total}");
+        let angle = f64::from(m.angle_deg().unwrap());
+        assert!(circle_gap_deg(angle, 0.0) < 0.1, "{angle}");
         assert_eq!(m.set_target_total_angle_deg(0.0), Ok(()));
     }
 
@@ -1683,10 +1698,10 @@ mod tests {
         let at = spin(&m, 0.0, 1.0e6, &mut check);
         let end = spin(&m, at, -7.5e5, &mut check);
         assert!(worst < 1e-3, "worst {worst}°");
-        // The total stays as close as its f32 can be.
+        // The total stays as close as its f32 can be (values 0.9° apart at 250 000 rad).
         let total = f64::from(m.total_angle_deg().unwrap());
         let (_, reported) = code_at(end);
-        assert!((total - reported.to_degrees()).abs() < 8.0, "{total}");
+        assert!((total - reported.to_degrees()).abs() < 1.5, "{total}");
     }
 
     #[test]
@@ -1735,11 +1750,26 @@ mod tests {
         m.update(T0, 0.001); // the tick applies it
         let angle = f64::from(m.angle_deg().unwrap());
         assert!(circle_gap_deg(angle, 30.0) < 1e-3, "{angle}");
+        // The total is small again, and as exact as a small total can be (not the difference
+        // of two f32s near 300 000 rad: 0.42° off), so a total-angle target agrees with it.
+        let total = f64::from(m.total_angle_deg().unwrap());
+        assert!((total - 30.0).abs() < 1e-3, "{total}");
         let at = spin(&m, at, 2.0, |_| {});
         let (_, now) = code_at(at);
         let expect = 30.0 + (now - homed_at).to_degrees();
         let angle = f64::from(m.angle_deg().unwrap());
         assert!(circle_gap_deg(angle, expect) < 1e-3, "{angle} vs {expect}");
+        let total = f64::from(m.total_angle_deg().unwrap());
+        assert!((total - expect).abs() < 1e-3, "{total} vs {expect}");
+        // Holding 40° by total angle: the field sent is the reading plus the 40° − total way.
+        m.set_target_total_angle_deg(40.0).unwrap();
+        let field = f64::from(code_at(at).0) * 25.0 / 65535.0 - 12.5;
+        let sent = f64::from(packed_position_rad(&packed(&m, T0)));
+        let want = field + (40.0 - expect).to_radians();
+        assert!(
+            (sent - want).abs() < 25.0 / 65535.0 + 1e-6,
+            "{sent} vs {want}"
+        );
 
         // Silent past the 100 ms timeout, then back reading code 0x4000 under `Restart`: the
         // total is that field plus the homing offset, 30° − (the position homed at).
