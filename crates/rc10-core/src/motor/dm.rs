@@ -793,11 +793,13 @@ impl CanNode for DmMotor {
                 }
             }
             // Against a live reading only: the one before an outage may be stale (the joint
-            // moved, or the motor was power-cycled), and a return's policy applies first.
+            // moved, or the motor was power-cycled), and a return's policy applies first. Not
+            // while a SaveZero still waits behind another special: FE would clear it.
             if let Some(deg) = s.pending_home_deg
                 && online
                 && !s.awaiting_return
                 && s.position_rad.is_some()
+                && !s.pending.contains(&DmSpecial::SaveZero)
             {
                 // From small values only (the angle asked for less the reported position, and
                 // the same within a turn): exact however many wraps there were.
@@ -1270,6 +1272,26 @@ mod tests {
         assert!((total - 90.0).abs() < 0.01, "{total}");
         let angle = f64::from(m.angle_deg().unwrap());
         assert!(circle_gap_deg(angle, 90.0) < 0.01, "{angle}");
+    }
+
+    #[test]
+    fn homing_asked_with_a_save_zero_waiting_behind_another_special_applies_after_it() {
+        // ClearError, then SaveZero, then a homing to 90°: FB goes out first, and the homing
+        // must not apply to the old zero on that tick (FE would then clear it).
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0xC000, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.send_special(DmSpecial::ClearError);
+        m.send_special(DmSpecial::SaveZero);
+        m.set_total_angle_here_deg(90.0).unwrap();
+        assert_eq!(packed(&m, T0), special(0xFB));
+        assert_eq!(packed(&m, T0), special(0xFE));
+        // The first reading after the new zero (about 0 rad) is where 90° is.
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        packed(&m, T0);
+        let total = m.total_angle_deg().unwrap();
+        assert!((total - 90.0).abs() < 0.01, "{total}");
     }
 
     #[test]
