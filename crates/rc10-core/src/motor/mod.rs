@@ -181,7 +181,9 @@ pub trait Motor: Sync {
     /// Limits the current the motor is commanded, in amps, from the next tick on (chassis
     /// power limiting): the ESC's own range still applies on top, and the loops' anti-windup
     /// works against the lower of the two. Negative is [`TargetError::OutOfRange`]; infinity
-    /// means "the ESC's range". The default reports [`TargetError::Unsupported`].
+    /// means "the ESC's range". A device that runs its own loop limits only what rc10
+    /// commands in amps: a VESC in speed, duty or position mode keeps the current limits set
+    /// in VESC Tool. The default reports [`TargetError::Unsupported`].
     fn set_current_limit_amps(&self, amps: f32) -> Result<(), TargetError> {
         let _ = amps;
         Err(TargetError::Unsupported)
