@@ -68,7 +68,9 @@ impl<F: Copy + PartialEq + Debug> LinkOracle<F> {
     /// The value and `lost` flag the link must report at `now`.
     pub fn expect(&self, now: u64, neutral: F) -> (F, bool) {
         match self.last {
-            Some((t, Some(f))) if now <= t || now - t <= TIMEOUT_US => (f, false),
+            // Fresh within the timeout either side of `now` (a stamp further ahead is a
+            // fault, not a live link).
+            Some((t, Some(f))) if now.abs_diff(t) <= TIMEOUT_US => (f, false),
             _ => (neutral, true),
         }
     }

@@ -92,12 +92,17 @@ impl<T: Copy> Link<T> {
         self.errors = self.errors.wrapping_add(1);
     }
 
-    /// The value to act on at `now`.
+    /// The value to act on at `now`: the last valid frame while it is at most the timeout
+    /// old. A frame stamped after `now` (by another task a moment later) counts as fresh
+    /// while it is at most the timeout ahead; one further ahead is no sign of a live link (a
+    /// clock or stamping fault) and does not hold the link alive: the signal is lost.
     pub fn signal(&self, now: Instant) -> Signal<T> {
-        // A stamp after `now` is fresh: the elapsed time saturates to zero.
-        let fresh = self
-            .last_valid
-            .is_some_and(|t| now.saturating_duration_since(t) <= self.timeout);
+        let fresh = self.last_valid.is_some_and(|t| {
+            let apart = now
+                .checked_duration_since(t)
+                .or_else(|| t.checked_duration_since(now));
+            apart.is_some_and(|d| d <= self.timeout)
+        });
         if fresh && !self.failsafe {
             Signal {
                 value: self.last,
@@ -603,13 +608,57 @@ mod tests {
     fn stamps_at_the_ends_of_time_neither_panic_nor_wrap() {
         let mut link = Link::new(0i32, Duration::from_millis(100));
         link.accept(5, Instant::from_ticks(u64::MAX));
-        // A stamp after `now` is fresh.
-        assert_eq!(link.signal(Instant::from_ticks(0)).value, 5);
+        // A stamp at the end of time, read at its start: far ahead of `now`, so lost
+        // (neutral), not fresh for ever.
+        assert_eq!(
+            link.signal(Instant::from_ticks(0)),
+            Signal {
+                value: 0,
+                lost: true
+            }
+        );
         assert!(!link.signal(Instant::from_ticks(u64::MAX)).lost);
         let mut f = GapFramer::<3>::new(Duration::from_millis(1));
         assert_eq!(f.push(1, Instant::from_ticks(u64::MAX)), Framed::Pending);
         // Time going backwards is a gap.
         assert_eq!(f.push(2, Instant::from_ticks(0)), Framed::Truncated);
+    }
+
+    #[test]
+    fn a_stamp_ahead_of_now_is_fresh_only_within_the_timeout() {
+        // Stamped by the receive task a moment after the control task read its clock: fresh.
+        // Stamped further ahead than the timeout (100 ms): lost, whatever comes later.
+        let mut link = Link::new(0i32, Duration::from_millis(100));
+        link.accept(7, Instant::from_millis(1_100));
+        let at = |ms| link.signal(Instant::from_millis(ms));
+        assert_eq!(
+            at(1_000),
+            Signal {
+                value: 7,
+                lost: false
+            }
+        ); // 100 ms ahead
+        assert_eq!(
+            at(999),
+            Signal {
+                value: 0,
+                lost: true
+            }
+        ); // 101 ms ahead
+        assert_eq!(
+            at(1_200),
+            Signal {
+                value: 7,
+                lost: false
+            }
+        ); // 100 ms old
+        assert_eq!(
+            at(1_201),
+            Signal {
+                value: 0,
+                lost: true
+            }
+        ); // 101 ms old
     }
 
     #[test]
