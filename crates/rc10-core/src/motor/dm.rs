@@ -62,9 +62,9 @@ pub const PROBE_TICKS: u8 = 10;
 /// made when the target is set and the radian field differ by a few f32 steps.
 const REACH_TOLERANCE: f32 = 1.0e-5;
 
-/// Largest MIT position gain (fixed by the protocol).
+/// Largest MIT position gain, N·m/rad (fixed by the protocol).
 pub const KP_MAX: f32 = 500.0;
-/// Largest MIT velocity gain (fixed by the protocol).
+/// Largest MIT velocity gain, N·m·s/rad (fixed by the protocol).
 pub const KD_MAX: f32 = 5.0;
 
 /// The ranges configured in the motor (Damiao's tool: PMAX, VMAX, TMAX).
@@ -105,7 +105,9 @@ pub struct MitCommand {
 }
 
 impl MitCommand {
-    /// Zero gains and zero torque: the motor produces no torque.
+    /// Zero gains and zero torque: the motor produces no torque. (The 12-bit torque field has
+    /// no code for exactly 0: it carries the one nearest, 2047, which the motor reads as
+    /// −0.0024 N·m with the factory ±10 N·m range.)
     pub const ZERO_TORQUE: Self = Self {
         position_rad: 0.0,
         velocity_rad_s: 0.0,
@@ -289,7 +291,9 @@ pub struct DmConfig {
     /// [`PROBE_TICKS`]-th tick while it sends no feedback (before its first answer, or
     /// offline: a motor power-cycled during an outage comes back in Disabled, and may not
     /// answer until enabled). A motor back from an outage resumes its target, as DJI motors
-    /// do.
+    /// do, when it returns enabled or Disabled; one that returns reporting a fault (such as
+    /// [`DmFault::CommunicationLost`], if a CAN timeout is set in Damiao's tool and the
+    /// outage outlasted it) stays limp until it is sent [`DmSpecial::ClearError`].
     pub auto_enable: bool,
     /// Gearbox of the motor (informational: positions are already of the output shaft).
     pub gear: GearRatio,
