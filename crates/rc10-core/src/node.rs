@@ -183,9 +183,13 @@ pub struct BusUsage {
     /// offers a node only frames on these IDs (and the hardware acceptance filters are built
     /// from them), so [`CanNode::matches_frame`] can narrow it but never widen it.
     pub listen: IdSet,
-    /// Feedback frames per second the device sends on all of `listen` together (1000 for a
-    /// DJI ESC), for the frame budget.
+    /// Feedback frames per second the device sends on all of `listen` together by its own
+    /// clock (1000 for a DJI ESC), for the frame budget.
     pub feedback_hz: u32,
+    /// Feedback frames the device sends in answer to each tick's commands (a Damiao motor
+    /// replies to every command frame: 1), for the frame budget: per tick whatever the tick
+    /// period, where [`feedback_hz`](Self::feedback_hz) is per second.
+    pub replies_per_tick: u8,
     /// A slot in a shared command frame this node writes every tick.
     pub command_slot: Option<CommandSlot>,
     /// The IDs this node's whole frames go out on.
@@ -200,6 +204,7 @@ impl BusUsage {
     pub const NONE: Self = Self {
         listen: IdSet::EMPTY,
         feedback_hz: 0,
+        replies_per_tick: 0,
         command_slot: None,
         sends: IdSet::EMPTY,
         frames_per_tick: 0,
@@ -210,6 +215,15 @@ impl BusUsage {
     pub const fn listening(mut self, filter: IdFilter, hz: u32) -> Self {
         self.listen = self.listen.with(filter);
         self.feedback_hz = self.feedback_hz.saturating_add(hz);
+        self
+    }
+
+    /// Adds a listen filter and `replies` feedback frames a tick arriving through it in
+    /// answer to the node's commands.
+    #[must_use]
+    pub const fn answering(mut self, filter: IdFilter, replies: u8) -> Self {
+        self.listen = self.listen.with(filter);
+        self.replies_per_tick = self.replies_per_tick.saturating_add(replies);
         self
     }
 

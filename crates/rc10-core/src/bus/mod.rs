@@ -550,6 +550,7 @@ fn frame_budget<'n>(
     for node in nodes {
         let u = node.bus_usage();
         add(u.feedback_hz as f32 * tick_s, u.listen.any_extended());
+        add(f32::from(u.replies_per_tick), u.listen.any_extended());
         add(f32::from(u.frames_per_tick), u.sends.any_extended());
         command_frames = command_frames.saturating_add(u32::from(u.frames_per_tick));
         if let Some(slot) = u.command_slot

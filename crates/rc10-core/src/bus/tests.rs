@@ -158,6 +158,46 @@ fn frame_budget_admits_six_dji_motors_and_rejects_seven() {
 }
 
 #[test]
+fn damiao_replies_count_one_a_tick_whatever_the_tick_period() {
+    // A Damiao motor answers each command frame: a tick carries one command and one reply a
+    // motor, standard 8-byte frames of 111 bits unstuffed, whatever the period. Two motors
+    // every 0.5 ms, four every 1 ms and eight every 2 ms are all 444 bits a 500 µs: 88.8 %.
+    // (Counted as 1000 replies a second, the 2 ms bus would have been refused at 133 %, and
+    // the 0.5 ms one under-counted at 66.6 %.)
+    let dms: Vec<DmMotor> = (1..=8u16)
+        .map(|i| DmMotor::new(i, DmConfig::new(0x10 + i)).unwrap())
+        .collect();
+    for (period_us, motors) in [(500u64, 2usize), (1_000, 4), (2_000, 8)] {
+        let config = BusConfig {
+            tick_period: Duration::from_micros(period_us),
+            ..BusConfig::DEFAULT.with_tx_depth(8)
+        };
+        let mut b = BusBuilder::<8>::with_config(config);
+        for m in &dms[..motors] {
+            b.register(m).unwrap();
+        }
+        let budget = b.budget();
+        assert_eq!(
+            budget.frames_per_tick,
+            2.0 * motors as f32,
+            "{period_us} µs"
+        );
+        assert!(
+            (budget.nominal_load_percent - 88.8).abs() < 0.01,
+            "{period_us} µs: {}",
+            budget.nominal_load_percent
+        );
+        // One more motor is 133 % of the 0.5 ms bus and 111 % of the 1 ms one: refused.
+        if let Some(extra) = dms.get(motors).filter(|_| period_us < 2_000) {
+            assert!(
+                matches!(b.register(extra), Err(RegisterError::FrameBudget { .. })),
+                "{period_us} µs"
+            );
+        }
+    }
+}
+
+#[test]
 fn tick_updates_all_then_packs_all_in_registration_order() {
     let log = leak_log();
     let a = Probe::new("a", log);

@@ -149,8 +149,11 @@ impl<const S: usize, const E: usize> FilterPlan<S, E> {
             let f = usize::from(load_hz[1] < load_hz[0]);
             let fifo = if f == 0 { Fifo::Fifo0 } else { Fifo::Fifo1 };
             if let Some(load) = load_hz.get_mut(f) {
-                // Only compared between the FIFOs: saturating is as good as exact here.
-                *load = load.saturating_add(u64::from(usage.feedback_hz));
+                // Only compared between the FIFOs: saturating is as good as exact here. Replies
+                // to commands count as frames a second at the usual 1 kHz tick.
+                *load = load
+                    .saturating_add(u64::from(usage.feedback_hz))
+                    .saturating_add(1000 * u64::from(usage.replies_per_tick));
             }
             for filter in usage.listen.filters() {
                 plan.add(filter, fifo, f, &mut needed, &mut open);

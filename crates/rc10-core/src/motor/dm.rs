@@ -716,9 +716,10 @@ impl DmMotor {
 
 impl CanNode for DmMotor {
     fn bus_usage(&self) -> BusUsage {
-        // The motor answers every command frame on its master ID.
+        // The motor answers every command frame on its master ID: one reply a tick, whatever
+        // the tick period.
         BusUsage::NONE
-            .listening(IdFilter::standard(self.config.master_id), 1000)
+            .answering(IdFilter::standard(self.config.master_id), 1)
             .sending(IdFilter::standard(self.can_id), 1)
     }
 
@@ -1850,6 +1851,9 @@ mod tests {
             u.listen
                 .matches(CanFrame::standard(0x13, &[]).unwrap().id())
         );
-        assert_eq!((u.frames_per_tick, u.feedback_hz), (1, 1000));
+        assert_eq!(
+            (u.frames_per_tick, u.feedback_hz, u.replies_per_tick),
+            (1, 0, 1)
+        );
     }
 }
