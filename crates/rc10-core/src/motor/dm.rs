@@ -106,8 +106,8 @@ pub struct MitCommand {
 
 impl MitCommand {
     /// Zero gains and zero torque: the motor produces no torque. (The 12-bit torque field has
-    /// no code for exactly 0: it carries the one nearest, 2047, which the motor reads as
-    /// −0.0024 N·m with the factory ±10 N·m range.)
+    /// no code for exactly 0: 0 N·m lies halfway between codes 2047 and 2048 and truncates to
+    /// 2047, which the motor reads as −0.0024 N·m with a ±10 N·m range, `MitLimits::DEFAULT`.)
     pub const ZERO_TORQUE: Self = Self {
         position_rad: 0.0,
         velocity_rad_s: 0.0,

@@ -16,18 +16,11 @@
 //! feedback between output-shaft units and the VESC's (pole pairs and gear ratio are explicit)
 //! and clamps every command to the configured limits before the integer conversion.
 //!
-//! Slow speeds: the VESC firmware's speed loop does not run below its minimum eRPM (VESC Tool
-//! "Minimum ERPM", `s_pid_min_erpm`, 900 by default): it releases the motor instead (zero
-//! current: vedderb/bldc 6.x `foc_run_pid_control_speed`), so a wheel asked for 0 rpm, or for
-//! less than `min ERPM / (pole pairs × gear ratio)` rpm (e.g. 900 / 7 ≈ 129 rpm for a
-//! 7-pole-pair hub motor in direct drive), coasts: a chassis on a slope rolls, and one pushed
-//! gives way. RC10_LIB turned an eRPM target of 0 into a hard brake. Here that is an explicit
-//! option, [`VescConfig::zero_speed_brake_amps`]: `Some(amps)` sends `SET_CURRENT_BRAKE` with
-//! that current (a braking torque you choose) for every speed target below
-//! [`VescConfig::min_erpm`] (set it to the controller's setting) or 0 on the wire; `None`
-//! (default) sends `SET_RPM` and the VESC releases the motor. For slow motion lower the
-//! setting in VESC Tool (and `min_erpm` with it), or use current or position targets. While
-//! offline or disabled the driver sends `SET_CURRENT 0`, which releases the motor.
+//! RC10_LIB turned an eRPM target of 0 into a hard brake. Here that is an explicit option,
+//! [`VescConfig::zero_speed_brake_amps`]: `Some(amps)` sends `SET_CURRENT_BRAKE` with that
+//! current (a braking torque you choose) whenever the speed command would reach the wire as
+//! eRPM 0; `None` (default) sends `SET_RPM 0`. While offline or disabled the driver sends
+//! `SET_CURRENT 0`, which releases the motor.
 //!
 //! Position: the VESC's position (the `SET_POS` target and STATUS_4's PID position) is its
 //! encoder's angle divided by VESC Tool's "Angle Division" (`p_pid_ang_div`, default 1),
@@ -37,6 +30,15 @@
 //! turns pole-pairs times per revolution), Angle Division 1 and offset 0. So use angle
 //! targets and [`MotorState::angle_deg`] only on a VESC set up that way; the driver offers
 //! them in direct drive only (with a gearbox the rotor's angle is not the output's).
+//!
+//! Slow speeds: the VESC firmware's speed loop does not run below its minimum eRPM (VESC Tool
+//! "Minimum ERPM", `s_pid_min_erpm`, 900 by default): a running motor is short-braked
+//! instead (duty 0: vedderb/bldc `mcpwm_foc.c`, "Brake when set ERPM is below min ERPM"), a
+//! braking torque that grows with speed, so the wheel slows to a stop but is not held there
+//! (on a slope it creeps); a motor that is not running is not started. An output target below
+//! `min ERPM / (pole pairs × gear ratio)` rpm (e.g. 900 / 7 ≈ 129 rpm for a 7-pole-pair hub
+//! motor in direct drive) therefore brakes the wheel rather than turning it slowly. Lower that
+//! setting in VESC Tool, or drive slow motion with current or position targets.
 
 use super::{ControlMode, HealthConfig, Liveness, Motor, MotorState, TargetError};
 use crate::can::{CanFrame, IdFilter};
@@ -194,16 +196,9 @@ pub struct VescConfig {
     pub max_brake_amps: f32,
     /// Output-shaft speed targets are clamped to ±this, in rpm.
     pub max_speed_rpm: f32,
-    /// Send a brake current (amps) instead of `SET_RPM` for a speed target the VESC's speed
-    /// loop would not run, so the wheel is held instead of released: below
-    /// [`min_erpm`](Self::min_erpm), or 0 on the wire (below half an eRPM).
+    /// Send a brake current (amps) instead of `SET_RPM 0` for a speed target that reaches the
+    /// wire as eRPM 0 (below half an eRPM).
     pub zero_speed_brake_amps: Option<f32>,
-    /// The controller's minimum eRPM for its speed loop (VESC Tool "Minimum ERPM",
-    /// `s_pid_min_erpm`; 900 by default, the firmware's default): below it the VESC releases
-    /// the motor (zero current) rather than run its speed loop, and
-    /// [`zero_speed_brake_amps`](Self::zero_speed_brake_amps) brakes instead. Finite and
-    /// ≥ 0, else [`VescError::InvalidLimit`].
-    pub min_erpm: f32,
     /// Frames per second the VESC sends of each status packet (firmware 6.x:
     /// `can_status_rate_1`; the firmware's default is 50 Hz). Every one counts in the bus's
     /// frame budget: at 1 Mbit/s an 8-byte STATUS frame holds the wire for 131–160 µs.
@@ -220,7 +215,7 @@ pub struct VescConfig {
 
 impl VescConfig {
     /// Direct drive with `pole_pairs`, 60 A, 20 A brake, 10 000 rpm, no zero-speed brake,
-    /// minimum eRPM 900, STATUS_1 at 1 kHz, no torque constant, 100 ms offline timeout.
+    /// STATUS_1 at 1 kHz, no torque constant, 100 ms offline timeout.
     pub const fn new(pole_pairs: u8) -> Self {
         Self {
             pole_pairs,
@@ -229,7 +224,6 @@ impl VescConfig {
             max_brake_amps: 20.0,
             max_speed_rpm: 10_000.0,
             zero_speed_brake_amps: None,
-            min_erpm: 900.0,
             status_hz: 1000,
             status_packets: VescStatusSet::STATUS_1,
             torque_constant_nm_per_amp: None,
@@ -338,9 +332,6 @@ impl VescMotor {
         if let Some(b) = config.zero_speed_brake_amps
             && (b.is_nan() || b < 0.0)
         {
-            return Err(VescError::InvalidLimit);
-        }
-        if !(config.min_erpm.is_finite() && config.min_erpm >= 0.0) {
             return Err(VescError::InvalidLimit);
         }
         if let Some(kt) = config.torque_constant_nm_per_amp
@@ -463,14 +454,10 @@ impl VescMotor {
             ControlMode::Speed => {
                 let rpm = saturate(s.target, c.max_speed_rpm);
                 match c.zero_speed_brake_amps {
-                    // Below the VESC's minimum, or 0 on the wire (rounded half away from zero:
-                    // below half an eRPM), the VESC would release the motor.
-                    Some(b) if (rpm * c.erpm_per_rpm()).abs() < c.min_erpm.max(0.5) => {
-                        VescCommand::Brake(saturate(
-                            saturate(b, c.max_brake_amps),
-                            s.user_current_limit,
-                        ))
-                    }
+                    // Rounded half away from zero on the wire: below half an eRPM it is 0.
+                    Some(b) if (rpm * c.erpm_per_rpm()).abs() < 0.5 => VescCommand::Brake(
+                        saturate(saturate(b, c.max_brake_amps), s.user_current_limit),
+                    ),
                     _ => VescCommand::Erpm(rpm * c.erpm_per_rpm()),
                 }
             }
@@ -739,11 +726,8 @@ mod tests {
         online(&m);
         m.set_target_rpm(0.0).unwrap();
         assert_eq!(packed(&m), (0x0303, vec![0, 0, 0, 0]));
-        // With no minimum eRPM (a VESC set to run its speed loop down to 0), only what reaches
-        // the wire as 0 brakes.
         let mut cfg = VescConfig::new(7);
         cfg.zero_speed_brake_amps = Some(5.0);
-        cfg.min_erpm = 0.0;
         let braking = VescMotor::new(3, cfg).unwrap();
         online(&braking);
         braking.set_target_rpm(0.0).unwrap();
@@ -758,7 +742,6 @@ mod tests {
         // Exactly half an eRPM (0.25 rpm × 2 pole pairs) rounds away from zero: SET_RPM 1.
         let mut cfg = VescConfig::new(2);
         cfg.zero_speed_brake_amps = Some(5.0);
-        cfg.min_erpm = 0.0;
         let two_poles = VescMotor::new(3, cfg).unwrap();
         online(&two_poles);
         two_poles.set_target_rpm(0.25).unwrap();
@@ -768,49 +751,6 @@ mod tests {
         braking.set_current_limit_amps(2.0).unwrap();
         braking.set_target_rpm(0.0).unwrap();
         assert_eq!(packed(&braking), (0x0203, vec![0, 0, 0x07, 0xD0]));
-    }
-
-    #[test]
-    fn below_the_minimum_erpm_the_brake_holds_the_wheel_the_vesc_would_release() {
-        // 7 pole pairs through 3:1: 21 eRPM per output rpm. With VESC Tool's default minimum of
-        // 900 eRPM the speed loop runs from 900 / 21 = 42.86 rpm up; below it the VESC
-        // releases the motor, so the brake goes out instead: SET_CURRENT_BRAKE (2), 5 A =
-        // 5000 mA (0x1388).
-        let mut cfg = VescConfig::new(7);
-        cfg.gear = GearRatio::new(3, 1).unwrap();
-        cfg.zero_speed_brake_amps = Some(5.0);
-        let m = VescMotor::new(3, cfg).unwrap();
-        online(&m);
-        for rpm in [-42.8, -10.0, 0.0, 1.0, 42.8] {
-            m.set_target_rpm(rpm).unwrap();
-            assert_eq!(packed(&m), (0x0203, vec![0, 0, 0x13, 0x88]), "{rpm} rpm");
-        }
-        // 43 rpm = 903 eRPM (0x387) and -43 rpm = -903 eRPM: the VESC's loop runs them.
-        m.set_target_rpm(43.0).unwrap();
-        assert_eq!(packed(&m), (0x0303, vec![0, 0, 0x03, 0x87]));
-        m.set_target_rpm(-43.0).unwrap();
-        assert_eq!(packed(&m), (0x0303, vec![0xFF, 0xFF, 0xFC, 0x79]));
-        // Without the brake option a slow target goes out as it is (the VESC releases).
-        let mut cfg = VescConfig::new(7);
-        cfg.gear = GearRatio::new(3, 1).unwrap();
-        let m = VescMotor::new(3, cfg).unwrap();
-        online(&m);
-        m.set_target_rpm(10.0).unwrap();
-        // 210 eRPM = 0xD2.
-        assert_eq!(packed(&m), (0x0303, vec![0, 0, 0, 0xD2]));
-    }
-
-    #[test]
-    fn a_minimum_erpm_that_is_not_a_finite_non_negative_number_is_refused() {
-        for bad in [-1.0, f32::NAN, f32::INFINITY] {
-            let mut cfg = VescConfig::new(7);
-            cfg.min_erpm = bad;
-            assert_eq!(
-                VescMotor::new(3, cfg).err(),
-                Some(VescError::InvalidLimit),
-                "{bad}"
-            );
-        }
     }
 
     #[test]

@@ -95,7 +95,9 @@ impl<T: Copy> Link<T> {
     /// The value to act on at `now`: the last valid frame while it is at most the timeout
     /// old. A frame stamped after `now` (by another task a moment later) counts as fresh
     /// while it is at most the timeout ahead; one further ahead is no sign of a live link (a
-    /// clock or stamping fault) and does not hold the link alive: the signal is lost.
+    /// clock or stamping fault) and does not hold the link alive: the signal is lost. (This
+    /// does not change the link: such a frame reads fresh again, with its old values, from
+    /// the timeout before its stamp to the timeout after it.)
     pub fn signal(&self, now: Instant) -> Signal<T> {
         let fresh = self.last_valid.is_some_and(|t| {
             let apart = now
@@ -627,7 +629,7 @@ mod tests {
     #[test]
     fn a_stamp_ahead_of_now_is_fresh_only_within_the_timeout() {
         // Stamped by the receive task a moment after the control task read its clock: fresh.
-        // Stamped further ahead than the timeout (100 ms): lost, whatever comes later.
+        // Stamped further ahead than the timeout (100 ms): lost.
         let mut link = Link::new(0i32, Duration::from_millis(100));
         link.accept(7, Instant::from_millis(1_100));
         let at = |ms| link.signal(Instant::from_millis(ms));

@@ -54,13 +54,12 @@ fn vesc_reports_its_id_and_applied_command() {
 }
 
 #[test]
-fn vesc_zero_speed_brake_only_below_the_minimum_erpm() {
+fn vesc_zero_speed_brake_only_at_zero_speed() {
     // SET_RPM is packet 3, SET_CURRENT_BRAKE packet 2 (VESC firmware's CAN command ids).
-    // 200 rpm × 7 pole pairs = 1400 eRPM, above the default minimum of 900.
     let mut config = VescConfig::new(7);
     config.zero_speed_brake_amps = Some(5.0);
     let m = online_vesc(config);
-    m.set_target_rpm(200.0).unwrap();
+    m.set_target_rpm(100.0).unwrap();
     assert_eq!(sent_packet(&m, Instant::from_millis(2)), 3);
     m.set_target_rpm(0.0).unwrap();
     assert_eq!(sent_packet(&m, Instant::from_millis(3)), 2);
