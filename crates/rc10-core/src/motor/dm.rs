@@ -1263,40 +1263,31 @@ mod tests {
 
     #[test]
     fn homing_asked_with_save_zero_applies_to_the_new_zero() {
-        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
-        m.update_feedback(&feedback(1, 1, 0xC000, 0x7FF, 0x7FF, 30, 30), T0)
-            .unwrap();
-        m.set_total_angle_here_deg(90.0).unwrap();
-        m.send_special(DmSpecial::SaveZero);
-        assert_eq!(packed(&m, T0), special(0xFE));
-        // The first reading after the new zero (about 0 rad) is where 90° is.
-        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
-            .unwrap();
-        packed(&m, T0);
-        let total = m.total_angle_deg().unwrap();
-        assert!((total - 90.0).abs() < 0.01, "{total}");
-        let angle = f64::from(m.angle_deg().unwrap());
-        assert!(circle_gap_deg(angle, 90.0) < 0.01, "{angle}");
-    }
-
-    #[test]
-    fn homing_asked_with_a_save_zero_waiting_behind_another_special_applies_after_it() {
-        // ClearError, then SaveZero, then a homing to 90°: FB goes out first, and the homing
-        // must not apply to the old zero on that tick (FE would then clear it).
-        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
-        m.update_feedback(&feedback(1, 1, 0xC000, 0x7FF, 0x7FF, 30, 30), T0)
-            .unwrap();
-        m.send_special(DmSpecial::ClearError);
-        m.send_special(DmSpecial::SaveZero);
-        m.set_total_angle_here_deg(90.0).unwrap();
-        assert_eq!(packed(&m, T0), special(0xFB));
-        assert_eq!(packed(&m, T0), special(0xFE));
-        // The first reading after the new zero (about 0 rad) is where 90° is.
-        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
-            .unwrap();
-        packed(&m, T0);
-        let total = m.total_angle_deg().unwrap();
-        assert!((total - 90.0).abs() < 0.01, "{total}");
+        // A homing to 90° asked together with SaveZero, alone or waiting behind another
+        // special (ClearError: FB goes out first, and the homing must not apply to the old
+        // zero on that tick, or FE would then clear it).
+        for ahead in [None, Some((DmSpecial::ClearError, 0xFB))] {
+            let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+            m.update_feedback(&feedback(1, 1, 0xC000, 0x7FF, 0x7FF, 30, 30), T0)
+                .unwrap();
+            if let Some((first, _)) = ahead {
+                m.send_special(first);
+            }
+            m.send_special(DmSpecial::SaveZero);
+            m.set_total_angle_here_deg(90.0).unwrap();
+            if let Some((_, code)) = ahead {
+                assert_eq!(packed(&m, T0), special(code));
+            }
+            assert_eq!(packed(&m, T0), special(0xFE));
+            // The first reading after the new zero (about 0 rad) is where 90° is.
+            m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+                .unwrap();
+            packed(&m, T0);
+            let total = m.total_angle_deg().unwrap();
+            assert!((total - 90.0).abs() < 0.01, "{ahead:?}: {total}");
+            let angle = f64::from(m.angle_deg().unwrap());
+            assert!(circle_gap_deg(angle, 90.0) < 0.01, "{ahead:?}: {angle}");
+        }
     }
 
     #[test]
