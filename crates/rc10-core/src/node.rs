@@ -6,7 +6,7 @@
 //! `&'static dyn CanNode`, by the scheduler task, the receiver task and application tasks, and
 //! keeps its mutable state behind its own short critical section (see [`crate::motor`]).
 
-use crate::can::{CanFrame, Id, IdFilter, RawId};
+use crate::can::{CanFrame, Id, IdFilter, RawId, SendError};
 use crate::time::Instant;
 use core::fmt;
 
@@ -349,6 +349,15 @@ pub(crate) const fn slot_permission(slot: Option<CommandSlot>) -> u32 {
     }
 }
 
+/// The command ID of the slot a [`slot_permission`] value allows, if it names one.
+pub(crate) const fn slot_permission_id(permission: u32) -> Option<u16> {
+    match permission {
+        ANY_SLOT | NO_SLOT => None,
+        // The ID takes bits 8–18 of the key: it fits a u16.
+        key => Some((key >> 8) as u16),
+    }
+}
+
 impl Default for TxBatch {
     /// An empty batch, as [`TxBatch::new`] (a derived default would remember a slot frame
     /// with ID 0x000 at index 0 that is not there).
@@ -556,6 +565,21 @@ pub trait CanNode: Sync {
 
     /// Writes this tick's command into `out`. Frame assembly only: no control math.
     fn pack_command(&self, out: &mut TxBatch);
+
+    /// The transport refused `frame`, which this node packed this tick, for `reason` (TX
+    /// buffers full, or bus-off): it was not queued and will not go out. Called by
+    /// [`Bus::transmit`](crate::bus::Bus::transmit) right after the refusal, before the next
+    /// tick, on the node that declared the frame's ID as a whole frame
+    /// ([`BusUsage::sending`]) or, for a merged command-slot frame, on every node that
+    /// declared a slot of it.
+    ///
+    /// A node whose commands repeat every tick needs nothing here (the default does
+    /// nothing): the next tick sends a fresh one. A node that sends one-shot frames (a
+    /// Damiao "save zero") queues the refused one again, or it is lost. The transport's
+    /// refusal is all the bus knows: a frame it queued can still go unacknowledged.
+    fn frame_refused(&self, frame: &CanFrame, reason: SendError) {
+        let _ = (frame, reason);
+    }
 }
 
 #[cfg(test)]

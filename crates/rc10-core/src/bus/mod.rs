@@ -23,7 +23,9 @@
 //! that frame on, so no node's frame is refused every tick: see [`Bus::transmit`]). Frames
 //! the transport cannot queue (TX buffers still full from
 //! an earlier tick, or bus-off) are counted in [`BusStats`], never waited for: the next tick
-//! sends fresh commands anyway. After a stall the missed ticks are skipped, not run back to
+//! sends fresh commands anyway. The nodes that declared a refused frame's ID are told
+//! ([`CanNode::frame_refused`]), so a one-shot command (a Damiao "save zero") is sent
+//! again instead of lost. After a stall the missed ticks are skipped, not run back to
 //! back ([`TickPacer`]).
 //!
 //! # Receiving
@@ -48,7 +50,7 @@
 use crate::can::RawId;
 use crate::can::stats::RateWindow;
 use crate::can::{
-    BusRates, BusStats, CanFrame, CanReceive, CanTransmit, ErrorState, ReceiveError, SendError,
+    BusRates, BusStats, CanFrame, CanReceive, CanTransmit, ErrorState, Id, ReceiveError, SendError,
     timing,
 };
 use crate::node::{CanNode, CommandSlot, IdSet, MAX_FRAMES_PER_TICK, TxBatch, slot_permission};
@@ -371,6 +373,19 @@ struct Declared {
     slot_permission: u32,
 }
 
+impl Declared {
+    /// Whether this node declared `id`: as a whole frame it sends, or as the command ID of
+    /// its slot (a slot frame merges several nodes' slots).
+    fn declares(&self, id: Id) -> bool {
+        let slot_id = match id {
+            Id::Standard(standard) => crate::node::slot_permission_id(self.slot_permission)
+                .is_some_and(|slot| slot == standard.as_raw()),
+            Id::Extended(_) => false,
+        };
+        slot_id || self.sends.matches(id)
+    }
+}
+
 /// The first standard ID of [`Bus`]'s direct routing table: DJI feedback arrives on
 /// 0x201–0x20B, so `0x200 + k` for `k < ROUTE_LEN` covers every DJI motor.
 const ROUTE_BASE: u16 = 0x200;
@@ -690,6 +705,9 @@ impl<'a, const N: usize> Bus<'a, N> {
     /// [`BusCounters::bus_off_events`](crate::can::BusCounters) counts each entry once,
     /// whichever way the transport reports it. A tick with nothing to send and no bus-off
     /// status leaves the state as it was (there was nothing to learn it from).
+    ///
+    /// Each refused frame is reported to the nodes that declared its ID
+    /// ([`CanNode::frame_refused`]) as it is refused.
     pub fn transmit(&self, batch: &TxBatch, tx: &mut impl CanTransmit) -> TransmitReport {
         let stale = tx.still_queued();
         if stale > 0 {
@@ -718,15 +736,20 @@ impl<'a, const N: usize> Bus<'a, N> {
                     self.stats.record_tx(timing::unstuffed_bits(frame));
                     report.queued = report.queued.saturating_add(1);
                 }
-                Err(SendError::Full) => {
-                    self.stats.record_tx_full();
-                    report.full = report.full.saturating_add(1);
-                    first_refused.get_or_insert(index);
-                }
-                Err(SendError::BusOff) => {
-                    self.stats.record_tx_bus_off();
-                    bus_off = true;
-                    report.bus_off = report.bus_off.saturating_add(1);
+                Err(reason) => {
+                    match reason {
+                        SendError::Full => {
+                            self.stats.record_tx_full();
+                            report.full = report.full.saturating_add(1);
+                            first_refused.get_or_insert(index);
+                        }
+                        SendError::BusOff => {
+                            self.stats.record_tx_bus_off();
+                            bus_off = true;
+                            report.bus_off = report.bus_off.saturating_add(1);
+                        }
+                    }
+                    self.tell_refused(frame, reason);
                 }
             }
         }
@@ -738,6 +761,18 @@ impl<'a, const N: usize> Bus<'a, N> {
             .unwrap_or(0);
         self.first_refused.store(next, Ordering::Relaxed);
         report
+    }
+
+    /// Tells the nodes that declared `frame`'s ID that the transport refused it
+    /// ([`CanNode::frame_refused`]). Off the common path: only for refused frames.
+    #[cold]
+    fn tell_refused(&self, frame: &CanFrame, reason: SendError) {
+        let id = frame.id();
+        for (node, declared) in self.nodes.iter().zip(&self.declared) {
+            if declared.declares(id) {
+                node.frame_refused(frame, reason);
+            }
+        }
     }
 
     /// Routes a received frame to the node that claims it.

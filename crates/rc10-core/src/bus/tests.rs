@@ -1104,3 +1104,130 @@ fn a_slot_that_does_not_fit_the_send_set_is_an_error_not_a_blind_spot() {
     let mut b = BusBuilder::<2>::new();
     assert_eq!(b.register(&p), Err(RegisterError::TooManyIds));
 }
+
+/// Sends one whole frame on `whole` or writes its command `slot`; records what it is told
+/// about refused frames.
+struct Told {
+    whole: Option<u16>,
+    slot: Option<CommandSlot>,
+    told: StdMutex<Vec<(u32, SendError)>>,
+}
+
+impl Told {
+    fn whole(id: u16) -> Self {
+        Self {
+            whole: Some(id),
+            slot: None,
+            told: StdMutex::new(Vec::new()),
+        }
+    }
+    fn slot(id: u16, index: u8) -> Self {
+        Self {
+            whole: None,
+            slot: CommandSlot::new(id, index),
+            told: StdMutex::new(Vec::new()),
+        }
+    }
+    fn told(&self) -> Vec<(u32, SendError)> {
+        self.told.lock().unwrap().clone()
+    }
+}
+
+impl CanNode for Told {
+    fn bus_usage(&self) -> BusUsage {
+        match (self.whole, self.slot) {
+            (Some(id), _) => BusUsage::NONE.sending(IdFilter::standard(id), 1),
+            (None, Some(slot)) => BusUsage::NONE.with_slot(slot),
+            (None, None) => BusUsage::NONE,
+        }
+    }
+    fn update_feedback(&self, _frame: &CanFrame, _now: Instant) -> Result<(), FrameError> {
+        Ok(())
+    }
+    fn update(&self, _now: Instant, _dt_s: f32) {}
+    fn pack_command(&self, out: &mut TxBatch) {
+        if let Some(id) = self.whole {
+            let _ = out.push(CanFrame::standard(id, &[7]).unwrap());
+        }
+        if let Some(slot) = self.slot {
+            out.write_slot(slot, 100);
+        }
+    }
+    fn frame_refused(&self, frame: &CanFrame, reason: SendError) {
+        self.told.lock().unwrap().push((frame.raw_id(), reason));
+    }
+}
+
+/// Refuses frames on the IDs it lists (Full or BusOff), queues the rest.
+struct RefuseIds(&'static [(u32, SendError)]);
+
+impl CanTransmit for RefuseIds {
+    fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
+        match self.0.iter().find(|(id, _)| *id == frame.raw_id()) {
+            Some(&(_, reason)) => Err(reason),
+            None => Ok(()),
+        }
+    }
+}
+
+#[test]
+fn a_refused_frame_is_reported_to_the_nodes_that_declared_it_and_no_others() {
+    let refused_whole = Told::whole(0x301);
+    let sent_whole = Told::whole(0x302);
+    let (refused_slot_a, refused_slot_b) = (Told::slot(0x1FF, 0), Told::slot(0x1FF, 1));
+    let sent_slot = Told::slot(0x200, 0);
+    let nodes = [
+        &refused_whole,
+        &sent_whole,
+        &refused_slot_a,
+        &refused_slot_b,
+        &sent_slot,
+    ];
+    let mut builder = BusBuilder::<8>::with_config(NO_BUDGET);
+    for n in nodes {
+        builder.register(n).unwrap();
+    }
+    let bus = builder.build();
+    let mut batch = TxBatch::new();
+    bus.tick(T0, 0.001, &mut batch);
+    assert_eq!(batch.frames().len(), 4); // 0x301, 0x302, 0x1FF (two slots), 0x200
+    let mut tx = RefuseIds(&[(0x301, SendError::Full), (0x1FF, SendError::BusOff)]);
+    let report = bus.transmit(&batch, &mut tx);
+    assert_eq!((report.queued, report.full, report.bus_off), (2, 1, 1));
+    assert_eq!(refused_whole.told(), [(0x301, SendError::Full)]);
+    assert_eq!(refused_slot_a.told(), [(0x1FF, SendError::BusOff)]);
+    assert_eq!(refused_slot_b.told(), [(0x1FF, SendError::BusOff)]);
+    assert!(sent_whole.told().is_empty());
+    assert!(sent_slot.told().is_empty());
+}
+
+#[test]
+fn a_damiao_save_zero_refused_by_a_full_queue_goes_out_once_there_is_room() {
+    let dm = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+    let mut builder = BusBuilder::<2>::new();
+    builder.register(&dm).unwrap();
+    let bus = builder.build();
+    // Online, at 0xC000 with the old zero.
+    let reply = CanFrame::standard(0x11, &[0x11, 0xC0, 0x00, 0x7F, 0xF7, 0xFF, 30, 30]).unwrap();
+    bus.dispatch(&reply, T0);
+    dm.send_special(crate::motor::dm::DmSpecial::SaveZero);
+    let save_zero = [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFE];
+    // The one TX buffer holds a frame nobody acknowledged.
+    let mut tx = TxQueue::<1>::new();
+    tx.try_send(&fb(0x7FF)).unwrap();
+    let mut batch = TxBatch::new();
+    for _ in 0..3 {
+        bus.tick(T0, 0.001, &mut batch);
+        assert_eq!(batch.frames()[0].data(), save_zero);
+        assert_eq!(bus.transmit(&batch, &mut tx).full, 1);
+        bus.dispatch(&reply, T0);
+    }
+    // Acknowledged at last: FE is queued, then MIT commands follow.
+    tx.pop().unwrap();
+    bus.tick(T0, 0.001, &mut batch);
+    assert_eq!(bus.transmit(&batch, &mut tx).queued, 1);
+    assert_eq!(tx.pop().unwrap().data(), save_zero);
+    bus.dispatch(&reply, T0);
+    bus.tick(T0, 0.001, &mut batch);
+    assert_ne!(batch.frames()[0].data()[..7], [0xFF; 7]);
+}

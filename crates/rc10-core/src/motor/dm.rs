@@ -41,7 +41,7 @@
 use super::{
     ControlMode, HealthConfig, Liveness, Motor, MotorState, MultiTurnOnReturn, TargetError,
 };
-use crate::can::{CanFrame, IdFilter};
+use crate::can::{CanFrame, IdFilter, SendError};
 use crate::encoder::GearRatio;
 use crate::math::{constrain, deg_to_rad, rad_to_deg, wrap_deg_360, wrap_signed};
 use crate::node::{BusUsage, CanNode, FrameError, TxBatch};
@@ -356,6 +356,9 @@ struct DmState {
     /// Special commands waiting, oldest first; each kind at most once (so never more than
     /// the four kinds).
     pending: heapless::Vec<DmSpecial, 4>,
+    /// The waiting special packed on the last tick, if one was: queued again should the
+    /// transport refuse it.
+    sent_special: Option<DmSpecial>,
     status: DmStatus,
     position_rad: Option<f32>,
     wraps: i32,
@@ -530,6 +533,7 @@ impl DmMotor {
                 target: 0.0,
                 user_mit: MitCommand::ZERO_TORQUE,
                 pending: heapless::Vec::new(),
+                sent_special: None,
                 status: DmStatus::Disabled,
                 position_rad: None,
                 wraps: 0,
@@ -587,6 +591,8 @@ impl DmMotor {
     /// motor is offline the specials wait (sent into silence they would be lost), but a
     /// waiting `Enable` also goes out as a probe on every [`PROBE_TICKS`]-th tick, for a
     /// motor that answers only once enabled (without auto-enable it could not come back).
+    /// A special the transport refuses (TX buffers full, bus-off; the bus tells the driver,
+    /// [`CanNode::frame_refused`]) waits again, first in line.
     ///
     /// - `Disable` also disables the driver (as [`Motor::disable`]): auto-enable does not
     ///   bring the motor back into motor mode until a new target is set.
@@ -783,6 +789,7 @@ impl CanNode for DmMotor {
             } else {
                 None
             };
+            s.sent_special = special;
             if let Some(special) = special {
                 // Each kind waits at most once: this removes the first.
                 s.pending.retain(|&waiting| waiting != special);
@@ -863,6 +870,24 @@ impl CanNode for DmMotor {
         if let Some(frame) = CanFrame::standard(self.can_id, &bytes) {
             let _ = out.push(frame);
         }
+    }
+
+    /// A waiting special the transport refused (TX buffers full, bus-off) waits again, first
+    /// in line: it goes out on the next tick the motor is online (a refused `SaveZero` would
+    /// otherwise be lost while the driver had already started its count afresh). An MIT
+    /// command or an `Enable` probe is not queued again: the next tick makes a fresh one.
+    fn frame_refused(&self, frame: &CanFrame, _reason: SendError) {
+        self.state.lock(|cell| {
+            let mut s = cell.borrow_mut();
+            if let Some(special) = s.sent_special
+                && frame.data() == special.bytes()
+            {
+                s.sent_special = None;
+                s.pending.retain(|&waiting| waiting != special);
+                // Each kind at most once, and this one is out of the list: there is room.
+                let _ = s.pending.insert(0, special);
+            }
+        });
     }
 }
 
@@ -1288,6 +1313,40 @@ mod tests {
             let angle = f64::from(m.angle_deg().unwrap());
             assert!(circle_gap_deg(angle, 90.0) < 0.01, "{ahead:?}: {angle}");
         }
+    }
+
+    #[test]
+    fn a_special_the_transport_refused_goes_out_again_first() {
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let refused = |bytes: [u8; 8]| {
+            m.frame_refused(&CanFrame::standard(0x01, &bytes).unwrap(), SendError::Full)
+        };
+        // At 0xC000 (+6.25 rad) with the old zero; a zero and a homing to 90° asked for.
+        let old_zero = feedback(1, 1, 0xC000, 0x7FF, 0x7FF, 30, 30);
+        m.update_feedback(&old_zero, T0).unwrap();
+        m.send_special(DmSpecial::SaveZero);
+        m.set_total_angle_here_deg(90.0).unwrap();
+        assert_eq!(packed(&m, T0), special(0xFE));
+        // TX buffers full: FE never left the board. A ClearError asked for meanwhile waits
+        // behind it.
+        refused(special(0xFE));
+        m.send_special(DmSpecial::ClearError);
+        // The motor still reports from its old zero; the homing must not apply to it.
+        m.update_feedback(&old_zero, T0).unwrap();
+        assert_eq!(packed(&m, T0), special(0xFE));
+        assert_eq!(packed(&m, T0), special(0xFB));
+        // Now FE went out: the first reading after the new zero (about 0 rad) is 90°.
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        let mit = packed(&m, T0);
+        assert_ne!(mit[..7], [0xFF; 7], "an MIT command");
+        let total = m.total_angle_deg().unwrap();
+        assert!((total - 90.0).abs() < 0.01, "{total}");
+        // A refused MIT command, or a special refused a second time (reported twice), is not
+        // queued: the next tick sends a fresh MIT command.
+        refused(mit);
+        refused(special(0xFB));
+        assert_ne!(packed(&m, T0)[..7], [0xFF; 7]);
     }
 
     #[test]
