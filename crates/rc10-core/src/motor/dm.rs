@@ -1327,15 +1327,16 @@ mod tests {
         m.send_special(DmSpecial::SaveZero);
         m.set_total_angle_here_deg(90.0).unwrap();
         assert_eq!(packed(&m, T0), special(0xFE));
-        // TX buffers full: FE never left the board. A ClearError asked for meanwhile waits
-        // behind it.
-        refused(special(0xFE));
+        // A ClearError and FE again are asked for before the bus learns that the TX buffers
+        // were full and FE never left the board: FE goes first, once, ClearError after it.
         m.send_special(DmSpecial::ClearError);
+        m.send_special(DmSpecial::SaveZero);
+        refused(special(0xFE));
         // The motor still reports from its old zero; the homing must not apply to it.
         m.update_feedback(&old_zero, T0).unwrap();
         assert_eq!(packed(&m, T0), special(0xFE));
         assert_eq!(packed(&m, T0), special(0xFB));
-        // Now FE went out: the first reading after the new zero (about 0 rad) is 90°.
+        // Now both went out: the first reading after the new zero (about 0 rad) is 90°.
         m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
         let mit = packed(&m, T0);
