@@ -282,9 +282,29 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
     /// A receiver that goes neutral after `timeout` without a valid frame (100 ms is a sensible
     /// timeout for both DBUS and SBUS).
     pub const fn new(timeout: Duration) -> Self {
+        Self::with_failsafe(timeout, F::NEUTRAL)
+    }
+
+    /// A receiver that reports `failsafe` instead of [`ReceiverFrame::NEUTRAL`] before the
+    /// first frame, after `timeout` without a valid frame and while the receiver reports
+    /// failsafe: the values this robot is safe with (an SBUS mode switch at the position that
+    /// disarms, where the neutral frame centres every channel). [`Signal::lost`] says it is
+    /// the failsafe either way.
+    ///
+    /// ```
+    /// use rc10_core::remote::sbus::{SbusFrame, SbusReceiver};
+    /// use rc10_core::time::{Duration, Instant};
+    /// let mut failsafe = SbusFrame::NEUTRAL;
+    /// failsafe.channels[4] = 172; // channel 5, the arming switch: low
+    /// let mut rx = SbusReceiver::with_failsafe(Duration::from_millis(100), failsafe);
+    /// let s = rx.signal(Instant::from_millis(5));
+    /// assert!(s.lost);
+    /// assert_eq!(s.value.channel(4, 0.0), -1.0);
+    /// ```
+    pub const fn with_failsafe(timeout: Duration, failsafe: F) -> Self {
         Self {
             framer: GapFramer::new(FRAME_GAP),
-            link: Link::new(F::NEUTRAL, timeout),
+            link: Link::new(failsafe, timeout),
             frames_lost: 0,
         }
     }
@@ -328,7 +348,8 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
         parsed
     }
 
-    /// The frame to act on at `now` (neutral if lost or in failsafe), after taking a frame
+    /// The frame to act on at `now` (neutral, or the failsafe frame this receiver was built
+    /// [`with_failsafe`](Self::with_failsafe), if lost or in failsafe), after taking a frame
     /// the line's silence has proven whole by `now` ([`poll`](Self::poll)).
     pub fn signal(&mut self, now: Instant) -> Signal<F> {
         let _ = self.poll(now);

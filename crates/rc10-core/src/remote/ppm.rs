@@ -63,11 +63,19 @@ impl<const N: usize> PpmReceiver<N> {
     /// plus a sync gap later (about 37 ms for 22.5 ms frames): keep `timeout` well above
     /// that (100 ms is usual).
     pub const fn new(timeout: Duration) -> Self {
+        Self::with_failsafe(timeout, [1500; N])
+    }
+
+    /// A decoder that reports `failsafe_us` (a pulse width in µs per channel) instead of
+    /// 1500 µs everywhere before the first frame and after `timeout` without a valid frame:
+    /// the values this robot is safe with (a throttle channel at its bottom, a mode switch
+    /// at the position that disarms). [`Signal::lost`] says it is the failsafe either way.
+    pub const fn with_failsafe(timeout: Duration, failsafe_us: [u16; N]) -> Self {
         Self {
             current: [1500; N],
             count: 0,
             synced: false,
-            link: Link::new([1500; N], timeout),
+            link: Link::new(failsafe_us, timeout),
         }
     }
 
@@ -123,12 +131,14 @@ impl<const N: usize> PpmReceiver<N> {
         None
     }
 
-    /// The channels to act on at `now`, in µs (neutral 1500 if lost).
+    /// The channels to act on at `now`, in µs (if lost: 1500, or the failsafe values this
+    /// decoder was built [`with_failsafe`](Self::with_failsafe)).
     pub fn signal(&self, now: Instant) -> Signal<[u16; N]> {
         self.link.signal(now)
     }
 
-    /// Channel `i` at `now` in −1…1 (1000–2000 µs), with `deadband`; 0 when lost.
+    /// Channel `i` at `now` in −1…1 (1000–2000 µs), with `deadband`; when lost, 0 (or the
+    /// failsafe value's, for a decoder built [`with_failsafe`](Self::with_failsafe)).
     pub fn channel(&self, i: usize, now: Instant, deadband: f32) -> f32 {
         self.signal(now)
             .value
@@ -178,6 +188,33 @@ mod tests {
         );
         assert_eq!(train(&mut rx, &ok, t).unwrap().unwrap()[7], 1800);
         assert_eq!(rx.link().errors(), 1);
+    }
+
+    #[test]
+    fn failsafe_pulse_widths_of_the_users_replace_1500_whenever_the_link_is_lost() {
+        // Channel 3 is the throttle: its failsafe is the bottom (1000 µs), not mid-stick.
+        let mut failsafe = [1500; 8];
+        failsafe[2] = 1000;
+        let mut rx = PpmReceiver::<8>::with_failsafe(Duration::from_millis(100), failsafe);
+        let t = Instant::from_millis(1);
+        let before = rx.signal(t);
+        assert!(before.lost);
+        assert_eq!(before.value, failsafe);
+        assert_eq!(rx.channel(2, t, 0.0), -1.0);
+        rx.push_interval(6000, t);
+        train(
+            &mut rx,
+            &[1500, 1500, 1750, 1500, 1500, 1500, 1500, 1500],
+            t,
+        );
+        assert!(!rx.signal(t).lost);
+        assert_eq!(rx.channel(2, t, 0.0), 0.5);
+        // More than 100 ms after the frame (stamped where its last channel ended and the 6 ms
+        // sync gap began: before the clock started, so at 0).
+        let later = Instant::from_millis(102);
+        assert!(rx.signal(later).lost);
+        assert_eq!(rx.signal(later).value, failsafe);
+        assert_eq!(rx.channel(2, later, 0.0), -1.0);
     }
 
     #[test]

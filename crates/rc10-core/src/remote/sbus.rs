@@ -151,6 +151,7 @@ impl ReceiverFrame for SbusFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::remote::Signal;
     use crate::time::{Duration, Instant};
 
     /// Encodes a frame (written independently of `parse`: a bit-by-bit packer).
@@ -285,6 +286,35 @@ mod tests {
         let s = rx.signal(Instant::from_millis(8));
         assert!(s.lost);
         assert_eq!(s.value, SbusFrame::NEUTRAL);
+    }
+
+    #[test]
+    fn a_failsafe_frame_of_the_users_replaces_neutral_whenever_the_link_is_lost() {
+        // Channel 5 arms the robot when high: the failsafe holds it low (172, −100 %).
+        let mut failsafe = SbusFrame::NEUTRAL;
+        failsafe.channels[4] = 172;
+        let mut rx = SbusReceiver::with_failsafe(Duration::from_millis(100), failsafe);
+        let lost = |s: Signal<SbusFrame>| s.lost && s.value == failsafe;
+        // Before the first frame.
+        assert!(lost(rx.signal(Instant::from_millis(1))));
+        // Live: the frame as sent, switch high.
+        let mut armed = [992; 16];
+        armed[4] = 1811;
+        rx.push_frame(&encode(armed, 0, 0), Instant::from_millis(7))
+            .unwrap();
+        let live = rx.signal(Instant::from_millis(8));
+        assert!(!live.lost);
+        assert_eq!(live.value.channel(4, 0.0), 1.0);
+        // The receiver's own failsafe flag, then silence past the timeout.
+        rx.push_frame(&encode(armed, 0x08, 0), Instant::from_millis(14))
+            .unwrap();
+        let s = rx.signal(Instant::from_millis(15));
+        assert!(lost(s));
+        assert_eq!(s.value.channel(4, 0.0), -1.0);
+        rx.push_frame(&encode(armed, 0, 0), Instant::from_millis(21))
+            .unwrap();
+        assert!(!rx.signal(Instant::from_millis(22)).lost);
+        assert!(lost(rx.signal(Instant::from_millis(122))));
     }
 
     #[test]
