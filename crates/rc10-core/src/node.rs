@@ -575,8 +575,11 @@ pub trait CanNode: Sync {
     ///
     /// A node whose commands repeat every tick needs nothing here (the default does
     /// nothing): the next tick sends a fresh one. A node that sends one-shot frames (a
-    /// Damiao "save zero") queues the refused one again, or it is lost. The transport's
-    /// refusal is all the bus knows: a frame it queued can still go unacknowledged.
+    /// Damiao "save zero") queues the refused one again, or it is lost: it can match the
+    /// refusal against what it packed last, since the bus reports refusals of the latest
+    /// tick's batch before the next tick (given `transmit` is called as the scheduler does).
+    /// The transport's refusal is all the bus knows: a frame it queued can still go
+    /// unacknowledged.
     fn frame_refused(&self, frame: &CanFrame, reason: SendError) {
         let _ = (frame, reason);
     }

@@ -707,7 +707,10 @@ impl<'a, const N: usize> Bus<'a, N> {
     /// status leaves the state as it was (there was nothing to learn it from).
     ///
     /// Each refused frame is reported to the nodes that declared its ID
-    /// ([`CanNode::frame_refused`]) as it is refused.
+    /// ([`CanNode::frame_refused`]) as it is refused. Pass the batch of the latest
+    /// [`tick`](Self::tick), once, before the next tick (as [`run_scheduler`] does): a node
+    /// matches a refusal against what it packed last, so a refusal of an older batch's
+    /// frame, or of the same batch sent twice, is not one it can act on.
     pub fn transmit(&self, batch: &TxBatch, tx: &mut impl CanTransmit) -> TransmitReport {
         let stale = tx.still_queued();
         if stale > 0 {

@@ -1108,15 +1108,16 @@ fn a_slot_that_does_not_fit_the_send_set_is_an_error_not_a_blind_spot() {
 /// Sends one whole frame on `whole` or writes its command `slot`; records what it is told
 /// about refused frames.
 struct Told {
-    whole: Option<u16>,
+    /// A whole frame's ID, and whether it is extended.
+    whole: Option<(u32, bool)>,
     slot: Option<CommandSlot>,
     told: StdMutex<Vec<(u32, SendError)>>,
 }
 
 impl Told {
-    fn whole(id: u16) -> Self {
+    fn whole(id: u32, extended: bool) -> Self {
         Self {
-            whole: Some(id),
+            whole: Some((id, extended)),
             slot: None,
             told: StdMutex::new(Vec::new()),
         }
@@ -1136,7 +1137,8 @@ impl Told {
 impl CanNode for Told {
     fn bus_usage(&self) -> BusUsage {
         match (self.whole, self.slot) {
-            (Some(id), _) => BusUsage::NONE.sending(IdFilter::standard(id), 1),
+            (Some((id, true)), _) => BusUsage::NONE.sending(IdFilter::extended(id), 1),
+            (Some((id, false)), _) => BusUsage::NONE.sending(IdFilter::standard(id as u16), 1),
             (None, Some(slot)) => BusUsage::NONE.with_slot(slot),
             (None, None) => BusUsage::NONE,
         }
@@ -1146,8 +1148,14 @@ impl CanNode for Told {
     }
     fn update(&self, _now: Instant, _dt_s: f32) {}
     fn pack_command(&self, out: &mut TxBatch) {
-        if let Some(id) = self.whole {
-            let _ = out.push(CanFrame::standard(id, &[7]).unwrap());
+        match self.whole {
+            Some((id, true)) => {
+                let _ = out.push(CanFrame::extended(id, &[7]).unwrap());
+            }
+            Some((id, false)) => {
+                let _ = out.push(CanFrame::standard(id as u16, &[7]).unwrap());
+            }
+            None => {}
         }
         if let Some(slot) = self.slot {
             out.write_slot(slot, 100);
@@ -1159,11 +1167,11 @@ impl CanNode for Told {
 }
 
 /// Refuses frames on the IDs it lists (Full or BusOff), queues the rest.
-struct RefuseIds(&'static [(u32, SendError)]);
+struct RefuseIds(&'static [(crate::can::Id, SendError)]);
 
 impl CanTransmit for RefuseIds {
     fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
-        match self.0.iter().find(|(id, _)| *id == frame.raw_id()) {
+        match self.0.iter().find(|(id, _)| *id == frame.id()) {
             Some(&(_, reason)) => Err(reason),
             None => Ok(()),
         }
@@ -1172,16 +1180,22 @@ impl CanTransmit for RefuseIds {
 
 #[test]
 fn a_refused_frame_is_reported_to_the_nodes_that_declared_it_and_no_others() {
-    let refused_whole = Told::whole(0x301);
-    let sent_whole = Told::whole(0x302);
+    let refused_whole = Told::whole(0x301, false);
+    let sent_whole = Told::whole(0x302, false);
     let (refused_slot_a, refused_slot_b) = (Told::slot(0x1FF, 0), Told::slot(0x1FF, 1));
     let sent_slot = Told::slot(0x200, 0);
+    // An extended frame refused (a VESC's), and one whose ID has the same number as the
+    // refused standard one: only the extended sender is told about its own.
+    let refused_extended = Told::whole(0x0000_0305, true);
+    let same_number_extended = Told::whole(0x0000_0301, true);
     let nodes = [
         &refused_whole,
         &sent_whole,
         &refused_slot_a,
         &refused_slot_b,
         &sent_slot,
+        &refused_extended,
+        &same_number_extended,
     ];
     let mut builder = BusBuilder::<8>::with_config(NO_BUDGET);
     for n in nodes {
@@ -1190,10 +1204,19 @@ fn a_refused_frame_is_reported_to_the_nodes_that_declared_it_and_no_others() {
     let bus = builder.build();
     let mut batch = TxBatch::new();
     bus.tick(T0, 0.001, &mut batch);
-    assert_eq!(batch.frames().len(), 4); // 0x301, 0x302, 0x1FF (two slots), 0x200
-    let mut tx = RefuseIds(&[(0x301, SendError::Full), (0x1FF, SendError::BusOff)]);
+    assert_eq!(batch.frames().len(), 6); // 0x301, 0x302, 0x1FF (two slots), 0x200, 2 extended
+    let std_id = |id| crate::can::Id::Standard(crate::can::StandardId::new(id).unwrap());
+    let ext_id = |id| crate::can::Id::Extended(crate::can::ExtendedId::new(id).unwrap());
+    let refusals: &'static [(crate::can::Id, SendError)] = Box::leak(Box::new([
+        (std_id(0x301), SendError::Full),
+        (std_id(0x1FF), SendError::BusOff),
+        (ext_id(0x305), SendError::Full),
+    ]));
+    let mut tx = RefuseIds(refusals);
     let report = bus.transmit(&batch, &mut tx);
-    assert_eq!((report.queued, report.full, report.bus_off), (2, 1, 1));
+    assert_eq!((report.queued, report.full, report.bus_off), (3, 2, 1));
+    assert_eq!(refused_extended.told(), [(0x305, SendError::Full)]);
+    assert!(same_number_extended.told().is_empty());
     assert_eq!(refused_whole.told(), [(0x301, SendError::Full)]);
     assert_eq!(refused_slot_a.told(), [(0x1FF, SendError::BusOff)]);
     assert_eq!(refused_slot_b.told(), [(0x1FF, SendError::BusOff)]);

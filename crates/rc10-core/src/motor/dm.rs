@@ -359,6 +359,9 @@ struct DmState {
     /// The waiting special packed on the last tick, if one was: queued again should the
     /// transport refuse it.
     sent_special: Option<DmSpecial>,
+    /// What packing a `SaveZero` cleared, put back should the transport refuse it (the motor
+    /// never took the new zero).
+    before_zero: Option<BeforeZero>,
     status: DmStatus,
     position_rad: Option<f32>,
     wraps: i32,
@@ -391,7 +394,69 @@ struct DmState {
     out: [u8; 8],
 }
 
+/// The multi-turn count and homing a `SaveZero` clears when it is packed.
+#[derive(Debug, Clone, Copy)]
+struct BeforeZero {
+    wraps: i32,
+    home_wraps: i32,
+    home_offset_rad: f32,
+    turn_offset: TurnFraction,
+    position_rad: Option<f32>,
+    hold_rad: Option<f32>,
+}
+
 impl DmState {
+    /// Takes a reported position `p` (rad, the motor's own wrapping frame), counting a wrap
+    /// when it jumped by more than `p_max` from the last one.
+    fn take_position(&mut self, p: f32, p_max: f32, wrap: TurnFraction) {
+        if let Some(prev) = self.position_rad {
+            if p - prev > p_max {
+                self.count_wrap(false, wrap);
+            } else if prev - p > p_max {
+                self.count_wrap(true, wrap);
+            }
+        }
+        self.position_rad = Some(p);
+    }
+
+    /// Clears the multi-turn count and homing for a `SaveZero` being packed, keeping them in
+    /// `before_zero`.
+    fn clear_for_zero(&mut self) {
+        self.before_zero = Some(BeforeZero {
+            wraps: self.wraps,
+            home_wraps: self.home_wraps,
+            home_offset_rad: self.home_offset_rad,
+            turn_offset: self.turn_offset,
+            position_rad: self.position_rad,
+            hold_rad: self.hold_rad,
+        });
+        self.wraps = 0;
+        self.home_wraps = 0;
+        self.home_offset_rad = 0.0;
+        self.turn_offset = TurnFraction::ZERO;
+        self.position_rad = None;
+        self.hold_rad = None;
+    }
+
+    /// Puts back what [`clear_for_zero`](Self::clear_for_zero) cleared (the `SaveZero` was
+    /// refused): the count goes on in the old frame, through a reading taken since.
+    fn undo_zero(&mut self, p_max: f32, wrap: TurnFraction) {
+        let Some(before) = self.before_zero.take() else {
+            return;
+        };
+        // A reading since the clear is in the old frame too (the motor never got FE).
+        let since = self.position_rad;
+        self.wraps = before.wraps;
+        self.home_wraps = before.home_wraps;
+        self.home_offset_rad = before.home_offset_rad;
+        self.turn_offset = before.turn_offset;
+        self.position_rad = before.position_rad;
+        self.hold_rad = before.hold_rad;
+        if let Some(p) = since {
+            self.take_position(p, p_max, wrap);
+        }
+    }
+
     /// What the MIT position field's frame (the motor's reported, wrapping position) must be
     /// shifted by to give the output's multi-turn position after homing, rad.
     fn frame_offset_rad(&self, p_max: f32) -> f32 {
@@ -534,6 +599,7 @@ impl DmMotor {
                 user_mit: MitCommand::ZERO_TORQUE,
                 pending: heapless::Vec::new(),
                 sent_special: None,
+                before_zero: None,
                 status: DmStatus::Disabled,
                 position_rad: None,
                 wraps: 0,
@@ -592,7 +658,8 @@ impl DmMotor {
     /// waiting `Enable` also goes out as a probe on every [`PROBE_TICKS`]-th tick, for a
     /// motor that answers only once enabled (without auto-enable it could not come back).
     /// A special the transport refuses (TX buffers full, bus-off; the bus tells the driver,
-    /// [`CanNode::frame_refused`]) waits again, first in line.
+    /// [`CanNode::frame_refused`]) waits again, first in line (a refused `SaveZero` also
+    /// puts back the count and homing that packing it cleared).
     ///
     /// - `Disable` also disables the driver (as [`Motor::disable`]): auto-enable does not
     ///   bring the motor back into motor mode until a new target is set.
@@ -602,7 +669,12 @@ impl DmMotor {
     ///   homing asked for before then applies to the first reading after it). An angle or
     ///   total-angle target refers to the new zero from then on: a joint holding 100° moves
     ///   another 100° after FE. Disable it (or set the target it should hold) around FE:
-    ///   Damiao's guides set the zero with the motor disabled.
+    ///   Damiao's guides set the zero with the motor disabled. Known limit: with a TX
+    ///   backlog (frames of earlier ticks still queued, `tx_stale`), this motor's MIT
+    ///   frames queued before FE go out first and its replies to them, in the old frame,
+    ///   arrive after FE was packed; a homing asked for together with `SaveZero` can then
+    ///   apply to such a reply. On a loaded bus, home once the reported position shows the
+    ///   new zero.
     pub fn send_special(&self, special: DmSpecial) {
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
@@ -751,14 +823,7 @@ impl CanNode for DmMotor {
                     s.wraps = 0;
                 }
             }
-            if let Some(prev) = s.position_rad {
-                if p - prev > l.p_max_rad {
-                    s.count_wrap(false, self.wrap_turn);
-                } else if prev - p > l.p_max_rad {
-                    s.count_wrap(true, self.wrap_turn);
-                }
-            }
-            s.position_rad = Some(p);
+            s.take_position(p, l.p_max_rad, self.wrap_turn);
             s.velocity_rad_s = uint_to_float(v_raw, l.v_max_rad_s, 12);
             s.torque_nm = uint_to_float(t_raw, l.t_max_nm, 12);
             s.status = DmStatus::from_code(d[0] >> 4);
@@ -796,12 +861,7 @@ impl CanNode for DmMotor {
                 if special == DmSpecial::SaveZero {
                     // Before the homing below: a homing asked for with it waits for the
                     // first reading after the new zero.
-                    s.wraps = 0;
-                    s.home_wraps = 0;
-                    s.home_offset_rad = 0.0;
-                    s.turn_offset = TurnFraction::ZERO;
-                    s.position_rad = None;
-                    s.hold_rad = None;
+                    s.clear_for_zero();
                 }
             }
             // Against a live reading only: the one before an outage may be stale (the joint
@@ -873,19 +933,26 @@ impl CanNode for DmMotor {
     }
 
     /// A waiting special the transport refused (TX buffers full, bus-off) waits again, first
-    /// in line: it goes out on the next tick the motor is online (a refused `SaveZero` would
-    /// otherwise be lost while the driver had already started its count afresh). An MIT
+    /// in line (or where it was asked for again since, should it have been): it goes out on
+    /// the next tick the motor is online. A refused `SaveZero` also puts back the multi-turn
+    /// count and homing that packing it cleared: the motor never took the new zero. An MIT
     /// command or an `Enable` probe is not queued again: the next tick makes a fresh one.
     fn frame_refused(&self, frame: &CanFrame, _reason: SendError) {
+        let p_max = self.config.limits.p_max_rad;
         self.state.lock(|cell| {
             let mut s = cell.borrow_mut();
-            if let Some(special) = s.sent_special
+            if let Some(special) = s.sent_special.take()
                 && frame.data() == special.bytes()
             {
-                s.sent_special = None;
-                s.pending.retain(|&waiting| waiting != special);
-                // Each kind at most once, and this one is out of the list: there is room.
-                let _ = s.pending.insert(0, special);
+                if special == DmSpecial::SaveZero {
+                    s.undo_zero(p_max, self.wrap_turn);
+                }
+                // Asked for again since it was packed: that request keeps its place (moving
+                // it ahead could reorder an Enable and a Disable asked for after it).
+                if !s.pending.contains(&special) {
+                    // Each kind at most once, and this one is not in the list: there is room.
+                    let _ = s.pending.insert(0, special);
+                }
             }
         });
     }
@@ -1327,27 +1394,109 @@ mod tests {
         m.send_special(DmSpecial::SaveZero);
         m.set_total_angle_here_deg(90.0).unwrap();
         assert_eq!(packed(&m, T0), special(0xFE));
-        // A ClearError and FE again are asked for before the bus learns that the TX buffers
-        // were full and FE never left the board: FE goes first, once, ClearError after it.
-        m.send_special(DmSpecial::ClearError);
-        m.send_special(DmSpecial::SaveZero);
+        // TX buffers full: FE never left the board. It goes out again, before a ClearError
+        // asked for after the refusal; the motor still reports from its old zero and the
+        // homing does not apply to that.
         refused(special(0xFE));
-        // The motor still reports from its old zero; the homing must not apply to it.
+        m.send_special(DmSpecial::ClearError);
         m.update_feedback(&old_zero, T0).unwrap();
         assert_eq!(packed(&m, T0), special(0xFE));
         assert_eq!(packed(&m, T0), special(0xFB));
-        // Now both went out: the first reading after the new zero (about 0 rad) is 90°.
+        // Both went out: the first reading after the new zero (about 0 rad) is 90°.
         m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
             .unwrap();
         let mit = packed(&m, T0);
         assert_ne!(mit[..7], [0xFF; 7], "an MIT command");
         let total = m.total_angle_deg().unwrap();
         assert!((total - 90.0).abs() < 0.01, "{total}");
-        // A refused MIT command, or a special refused a second time (reported twice), is not
-        // queued: the next tick sends a fresh MIT command.
+        // A refused MIT command, or a report about a special of an earlier tick, queues
+        // nothing: the next tick sends a fresh MIT command.
         refused(mit);
         refused(special(0xFB));
         assert_ne!(packed(&m, T0)[..7], [0xFF; 7]);
+    }
+
+    #[test]
+    fn a_refused_special_asked_for_again_since_keeps_the_later_place() {
+        // FD packed; an Enable, then a Disable again, asked for before the refusal is known.
+        // Sent FD, FC, FD the motor ends disabled; FD moved ahead of FC would leave it
+        // enabled while the driver is in Disabled mode.
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        m.send_special(DmSpecial::Disable);
+        assert_eq!(packed(&m, T0), special(0xFD));
+        m.send_special(DmSpecial::Enable);
+        m.send_special(DmSpecial::Disable);
+        m.frame_refused(
+            &CanFrame::standard(0x01, &special(0xFD)).unwrap(),
+            SendError::BusOff,
+        );
+        assert_eq!(packed(&m, T0), special(0xFC));
+        assert_eq!(packed(&m, T0), special(0xFD));
+        assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+    }
+
+    #[test]
+    fn a_refused_enable_probe_is_not_queued() {
+        // A motor that has not answered yet gets an Enable probe (auto-enable); the probe is
+        // refused. Once the motor answers, enabled, it gets MIT commands, not a late FC.
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        m.set_target_rpm(10.0).unwrap();
+        let probe = (0..PROBE_TICKS)
+            .map(|_| packed(&m, T0))
+            .find(|bytes| *bytes == special(0xFC));
+        assert!(probe.is_some(), "no probe within {PROBE_TICKS} ticks");
+        m.frame_refused(
+            &CanFrame::standard(0x01, &special(0xFC)).unwrap(),
+            SendError::Full,
+        );
+        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+            .unwrap();
+        assert_ne!(packed(&m, T0)[..7], [0xFF; 7]);
+    }
+
+    #[test]
+    fn a_refused_save_zero_leaves_the_count_as_if_it_was_never_sent() {
+        // Two motors read the same positions; only `m` is sent FE, and FE is refused. A
+        // reading taken between the packing and the refusal crosses the wrap.
+        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let twin = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+        let both = |p: u16| {
+            for motor in [&m, &twin] {
+                motor
+                    .update_feedback(&feedback(1, 1, p, 0x7FF, 0x7FF, 30, 30), T0)
+                    .unwrap();
+            }
+        };
+        // A wrap forward (+12.49 to −12.49 rad) and back, then homed to 100° at the +12.5 rad
+        // end.
+        both(0xFFF0);
+        both(0x0010);
+        both(0xFFF8);
+        for motor in [&m, &twin] {
+            motor.set_total_angle_here_deg(100.0).unwrap();
+            packed(motor, T0);
+        }
+        m.send_special(DmSpecial::SaveZero);
+        assert_eq!(packed(&m, T0), special(0xFE));
+        both(0x0004); // across the wrap again, forward
+        m.frame_refused(
+            &CanFrame::standard(0x01, &special(0xFE)).unwrap(),
+            SendError::Full,
+        );
+        let (total, twin_total) = (
+            m.total_angle_deg().unwrap(),
+            twin.total_angle_deg().unwrap(),
+        );
+        assert_eq!(total, twin_total);
+        // 100° plus the way from 0xFFF8 round to 0x0004: 7 codes up to 0xFFFF (+12.5 rad),
+        // the same point as 0x0000 (−12.5 rad), then 4: 11 codes of 25/65535 rad.
+        let expected = 100.0 + rad_to_deg(11.0 * 25.0 / 65535.0);
+        assert!((total - expected).abs() < 1e-3, "{total} vs {expected}");
+        assert_eq!(m.angle_deg(), twin.angle_deg());
+        // FE goes out on the next tick and clears the count then.
+        assert_eq!(packed(&m, T0), special(0xFE));
     }
 
     #[test]

@@ -15,7 +15,8 @@ use crate::time::{Duration, Instant};
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Signal<T> {
-    /// The last valid frame, or the neutral value while the link is lost.
+    /// The last valid frame, or, while the link is lost, the neutral value the link was
+    /// made with (a receiver's neutral frame, or the failsafe values it was built with).
     pub value: T,
     /// Whether the link is lost (no fresh valid frame within the timeout, or the receiver
     /// itself reported failsafe). A frame the receiver flags as a repeat of old values (SBUS
@@ -80,8 +81,8 @@ impl<T: Copy> Link<T> {
         self.frames = self.frames.wrapping_add(1);
     }
 
-    /// Records that the receiver itself reports failsafe (SBUS flag): outputs go neutral at
-    /// once, without waiting for the timeout.
+    /// Records that the receiver itself reports failsafe (SBUS flag): outputs go to the
+    /// link's neutral value at once, without waiting for the timeout.
     pub fn failsafe(&mut self, now: Instant) {
         self.failsafe = true;
         self.last_valid = Some(now);
@@ -332,7 +333,7 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
     }
 
     /// Feeds a whole frame received at `now`. A frame in which the receiver reports failsafe
-    /// sends the outputs neutral at once; one it flags as a repeat of old values
+    /// sends the outputs neutral (or to the failsafe frame) at once; one it flags as a repeat of old values
     /// ([`ReceiverFrame::frame_lost`]) does not restart the timeout ([`Link::hold`]).
     pub fn push_frame(&mut self, bytes: &[u8], now: Instant) -> Result<F, F::Error> {
         let parsed = F::parse(bytes);

@@ -128,7 +128,9 @@ impl fmt::Display for SbusError {
 impl core::error::Error for SbusError {}
 
 /// An SBUS receiver (see [`FrameReceiver`]); the receiver's own failsafe flag sends the
-/// outputs neutral at once, and frames it flags as lost are counted (`frames_lost`).
+/// outputs neutral (every channel centred; or the frame given to
+/// [`with_failsafe`](FrameReceiver::with_failsafe)) at once, and frames it flags as lost are
+/// counted (`frames_lost`).
 pub type SbusReceiver = FrameReceiver<SbusFrame, FRAME_LEN>;
 
 impl ReceiverFrame for SbusFrame {
