@@ -27,7 +27,9 @@ use crate::ops::{IdSel, Op, Set, Stamp, Step};
 use crate::proto::{self, vesc_packet as vp};
 use rc10_core::bus::{Bus, Dispatch, TickPacer};
 use rc10_core::can::loopback::TxQueue;
-use rc10_core::can::{BusStatus, CanFrame, CanTransmit, ErrorState, ExtendedId, Id, StandardId};
+use rc10_core::can::{
+    BusStatus, CanFrame, CanTransmit, ErrorState, ExtendedId, Id, SendError, StandardId,
+};
 use rc10_core::motor::dm::{self, DmSpecial, DmStatus, MitCommand};
 use rc10_core::motor::{ControlMode, MotorState};
 use rc10_core::node::TxBatch;
@@ -370,6 +372,11 @@ impl<'a> Harness<'a> {
                         DmSpecial::ClearError,
                     ][usize::from(k % 4)];
                     d.send_special(special);
+                    // Enable and Disable undo each other: the later one replaces a waiting
+                    // earlier one.
+                    if let Some(opposite) = opposite(special) {
+                        t.special.retain(|&waiting| waiting != opposite);
+                    }
                     if !t.special.contains(&special) {
                         t.special.push_back(special);
                     }
@@ -411,6 +418,8 @@ impl<'a> Harness<'a> {
         );
         assert_eq!(counters.tx_batch_overflow, 0, "the batch overflowed");
         check_frame_set(&frames, &self.motors);
+        // The Damiao specials packed this tick: queued again by the driver if refused.
+        let mut packed_specials = Vec::new();
         for i in 0..self.motors.len() {
             let m = self.motors[i];
             let state = m.motor().state();
@@ -427,6 +436,9 @@ impl<'a> Harness<'a> {
                     } else {
                         None
                     };
+                    if let Some(sp) = special {
+                        packed_specials.push((i, info.can_id, sp));
+                    }
                     t.offline_ticks = if state.online { 0 } else { t.offline_ticks + 1 };
                     check_dm(
                         &frames,
@@ -440,7 +452,25 @@ impl<'a> Harness<'a> {
                 }
             }
         }
-        let report = self.bus.transmit(&self.batch, &mut self.tx);
+        let mut tx = Recording {
+            inner: &mut self.tx,
+            refused: Vec::new(),
+        };
+        let report = self.bus.transmit(&self.batch, &mut tx);
+        let refused = tx.refused;
+        // A refused special waits again, first in line, unless its opposite was asked for
+        // since.
+        for (i, can_id, sp) in packed_specials {
+            let was_refused = refused.iter().any(|f| {
+                !f.is_extended() && f.raw_id() == u32::from(can_id) && f.data() == sp.bytes()
+            });
+            let t = &mut self.track[i];
+            let superseded = opposite(sp).is_some_and(|o| t.special.contains(&o));
+            if was_refused && !superseded {
+                t.special.retain(|&waiting| waiting != sp);
+                t.special.push_front(sp);
+            }
+        }
         assert_eq!(
             usize::from(report.queued) + usize::from(report.full) + usize::from(report.bus_off),
             frames.len(),
@@ -848,5 +878,36 @@ mod tests {
         }
         assert!(seeds >= 1);
         assert!(ever.iter().all(|e| *e), "motors never online: {ever:?}");
+    }
+}
+
+/// Forwards to the transport and records the frames it refused.
+struct Recording<'a> {
+    inner: &'a mut TxQueue<3>,
+    refused: Vec<CanFrame>,
+}
+
+impl CanTransmit for Recording<'_> {
+    fn try_send(&mut self, frame: &CanFrame) -> Result<(), SendError> {
+        let result = self.inner.try_send(frame);
+        if result.is_err() {
+            self.refused.push(*frame);
+        }
+        result
+    }
+    fn status(&self) -> BusStatus {
+        self.inner.status()
+    }
+    fn still_queued(&self) -> u8 {
+        self.inner.still_queued()
+    }
+}
+
+/// The Damiao special that undoes `special` (Enable against Disable), if any.
+fn opposite(special: DmSpecial) -> Option<DmSpecial> {
+    match special {
+        DmSpecial::Enable => Some(DmSpecial::Disable),
+        DmSpecial::Disable => Some(DmSpecial::Enable),
+        DmSpecial::SaveZero | DmSpecial::ClearError => None,
     }
 }

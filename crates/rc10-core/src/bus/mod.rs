@@ -709,8 +709,9 @@ impl<'a, const N: usize> Bus<'a, N> {
     /// Each refused frame is reported to the nodes that declared its ID
     /// ([`CanNode::frame_refused`]) as it is refused. Pass the batch of the latest
     /// [`tick`](Self::tick), once, before the next tick (as [`run_scheduler`] does): a node
-    /// matches a refusal against what it packed last, so a refusal of an older batch's
-    /// frame, or of the same batch sent twice, is not one it can act on.
+    /// matches a refusal against what it packed last, so it would misread a refusal of an
+    /// older batch's frame, or of the same batch sent twice (a Damiao driver could put back
+    /// a zero that did go out).
     pub fn transmit(&self, batch: &TxBatch, tx: &mut impl CanTransmit) -> TransmitReport {
         let stale = tx.still_queued();
         if stale > 0 {

@@ -207,6 +207,15 @@ pub enum DmSpecial {
 }
 
 impl DmSpecial {
+    /// The command that undoes this one, if any (Enable and Disable).
+    const fn opposite(self) -> Option<Self> {
+        match self {
+            Self::Enable => Some(Self::Disable),
+            Self::Disable => Some(Self::Enable),
+            Self::SaveZero | Self::ClearError => None,
+        }
+    }
+
     /// The eight data bytes.
     pub const fn bytes(self) -> [u8; 8] {
         let last = match self {
@@ -653,13 +662,16 @@ impl DmMotor {
     /// Sends `special` once, on a coming tick while the motor is online, instead of that
     /// tick's MIT command: one special a tick, in the order asked for (`ClearError` then
     /// `Enable` sends FB, then FC). A kind asked for again while it still waits keeps its
-    /// place, so at most the four kinds wait, none is dropped and none is starved. While the
+    /// place, so at most the four kinds wait, none is dropped and none is starved; `Enable`
+    /// and `Disable` undo each other, so the later of the two replaces a waiting earlier one
+    /// (Disable, Enable, Disable sends FD once: the motor ends disabled, as the driver). While the
     /// motor is offline the specials wait (sent into silence they would be lost), but a
     /// waiting `Enable` also goes out as a probe on every [`PROBE_TICKS`]-th tick, for a
     /// motor that answers only once enabled (without auto-enable it could not come back).
     /// A special the transport refuses (TX buffers full, bus-off; the bus tells the driver,
-    /// [`CanNode::frame_refused`]) waits again, first in line (a refused `SaveZero` also
-    /// puts back the count and homing that packing it cleared).
+    /// [`CanNode::frame_refused`]) waits again, first in line, unless its opposite was asked
+    /// for since (a refused `SaveZero` also puts back the count and homing that packing it
+    /// cleared).
     ///
     /// - `Disable` also disables the driver (as [`Motor::disable`]): auto-enable does not
     ///   bring the motor back into motor mode until a new target is set.
@@ -669,15 +681,19 @@ impl DmMotor {
     ///   homing asked for before then applies to the first reading after it). An angle or
     ///   total-angle target refers to the new zero from then on: a joint holding 100° moves
     ///   another 100° after FE. Disable it (or set the target it should hold) around FE:
-    ///   Damiao's guides set the zero with the motor disabled. Known limit: with a TX
-    ///   backlog (frames of earlier ticks still queued, `tx_stale`), this motor's MIT
-    ///   frames queued before FE go out first and its replies to them, in the old frame,
-    ///   arrive after FE was packed; a homing asked for together with `SaveZero` can then
-    ///   apply to such a reply. On a loaded bus, home once the reported position shows the
-    ///   new zero.
+    ///   Damiao's guides set the zero with the motor disabled. Known limit: a reply in the
+    ///   old frame taken after FE was packed (with a TX backlog, `tx_stale`, this motor's
+    ///   MIT frames queued before FE go out first; or a receive path running late) is read
+    ///   as the new frame: a homing asked for together with `SaveZero` can apply to it, and
+    ///   if it lay near ±`p_max` the first reading after the new zero can count a wrap.
+    ///   On a loaded bus, home once the reported position shows the new zero.
     pub fn send_special(&self, special: DmSpecial) {
         self.state.lock(|s| {
             let mut s = s.borrow_mut();
+            // The later of Enable and Disable wins: the earlier one no longer waits.
+            if let Some(opposite) = special.opposite() {
+                s.pending.retain(|&waiting| waiting != opposite);
+            }
             if !s.pending.contains(&special) {
                 // The other three kinds at most wait: there is room.
                 let _ = s.pending.push(special);
@@ -933,8 +949,8 @@ impl CanNode for DmMotor {
     }
 
     /// A waiting special the transport refused (TX buffers full, bus-off) waits again, first
-    /// in line (or where it was asked for again since, should it have been): it goes out on
-    /// the next tick the motor is online. A refused `SaveZero` also puts back the multi-turn
+    /// in line (unless its opposite, `Enable` against `Disable`, was asked for since: the
+    /// later one wins): it goes out on the next tick the motor is online. A refused `SaveZero` also puts back the multi-turn
     /// count and homing that packing it cleared: the motor never took the new zero. An MIT
     /// command or an `Enable` probe is not queued again: the next tick makes a fresh one.
     fn frame_refused(&self, frame: &CanFrame, _reason: SendError) {
@@ -947,10 +963,15 @@ impl CanNode for DmMotor {
                 if special == DmSpecial::SaveZero {
                     s.undo_zero(p_max, self.wrap_turn);
                 }
-                // Asked for again since it was packed: that request keeps its place (moving
-                // it ahead could reorder an Enable and a Disable asked for after it).
-                if !s.pending.contains(&special) {
-                    // Each kind at most once, and this one is not in the list: there is room.
+                // First in line: it was asked for before anything still waiting (asked for
+                // again since, it keeps the earlier place, as `send_special` does); unless its
+                // opposite was asked for since, which wins.
+                let superseded = special
+                    .opposite()
+                    .is_some_and(|opposite| s.pending.contains(&opposite));
+                if !superseded {
+                    s.pending.retain(|&waiting| waiting != special);
+                    // Each kind at most once, and this one is out of the list: there is room.
                     let _ = s.pending.insert(0, special);
                 }
             }
@@ -1417,24 +1438,54 @@ mod tests {
     }
 
     #[test]
-    fn a_refused_special_asked_for_again_since_keeps_the_later_place() {
-        // FD packed; an Enable, then a Disable again, asked for before the refusal is known.
-        // Sent FD, FC, FD the motor ends disabled; FD moved ahead of FC would leave it
-        // enabled while the driver is in Disabled mode.
-        let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
-        m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
-            .unwrap();
+    fn enable_and_disable_asked_for_in_turn_end_as_the_last_one_asked() {
+        let online = || {
+            let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
+            m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
+                .unwrap();
+            m
+        };
+        let refuse = |m: &DmMotor, code: u8| {
+            m.frame_refused(
+                &CanFrame::standard(0x01, &special(code)).unwrap(),
+                SendError::BusOff,
+            )
+        };
+        // Disable, Enable, Disable before a tick: FD once (FD then FC would leave the motor
+        // enabled while the driver is in Disabled mode).
+        let m = online();
+        m.send_special(DmSpecial::Disable);
+        m.send_special(DmSpecial::Enable);
+        m.send_special(DmSpecial::Disable);
+        assert_eq!(packed(&m, T0), special(0xFD));
+        assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+        // FD packed, then Enable and Disable asked for before the refusal is known: FD once.
+        let m = online();
         m.send_special(DmSpecial::Disable);
         assert_eq!(packed(&m, T0), special(0xFD));
         m.send_special(DmSpecial::Enable);
         m.send_special(DmSpecial::Disable);
-        m.frame_refused(
-            &CanFrame::standard(0x01, &special(0xFD)).unwrap(),
-            SendError::BusOff,
-        );
-        assert_eq!(packed(&m, T0), special(0xFC));
+        refuse(&m, 0xFD);
         assert_eq!(packed(&m, T0), special(0xFD));
         assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
+        // FD packed, then Enable asked for: the refused FD is superseded, FC goes.
+        let m = online();
+        m.send_special(DmSpecial::Disable);
+        assert_eq!(packed(&m, T0), special(0xFD));
+        m.send_special(DmSpecial::Enable);
+        refuse(&m, 0xFD);
+        assert_eq!(packed(&m, T0), special(0xFC));
+        assert_ne!(packed(&m, T0)[..7], [0xFF; 7]);
+        // FB packed, then Enable and ClearError asked for: FB first again, then FC (FC
+        // before FB would reach a motor whose fault is still latched).
+        let m = online();
+        m.send_special(DmSpecial::ClearError);
+        assert_eq!(packed(&m, T0), special(0xFB));
+        m.send_special(DmSpecial::Enable);
+        m.send_special(DmSpecial::ClearError);
+        refuse(&m, 0xFB);
+        assert_eq!(packed(&m, T0), special(0xFB));
+        assert_eq!(packed(&m, T0), special(0xFC));
     }
 
     #[test]
@@ -1469,16 +1520,28 @@ mod tests {
                     .unwrap();
             }
         };
-        // A wrap forward (+12.49 to −12.49 rad) and back, then homed to 100° at the +12.5 rad
-        // end.
+        // A wrap forward (+12.49 to −12.49 rad), homed to 100° there, then forward through
+        // 0 rad to the +12.5 rad end: at FE the count holds one wrap and the homing was made
+        // at one (neither is what clearing leaves).
         both(0xFFF0);
         both(0x0010);
-        both(0xFFF8);
         for motor in [&m, &twin] {
             motor.set_total_angle_here_deg(100.0).unwrap();
             packed(motor, T0);
         }
+        both(0x8000);
+        both(0xFFF8);
+        let before = m.total_angle_deg().unwrap();
+        // Refused with no reading in between: nothing changes.
         m.send_special(DmSpecial::SaveZero);
+        assert_eq!(packed(&m, T0), special(0xFE));
+        m.frame_refused(
+            &CanFrame::standard(0x01, &special(0xFE)).unwrap(),
+            SendError::Full,
+        );
+        assert_eq!(m.total_angle_deg(), Some(before));
+        assert_eq!(m.angle_deg(), twin.angle_deg());
+        // Refused again, with a reading across the wrap in between.
         assert_eq!(packed(&m, T0), special(0xFE));
         both(0x0004); // across the wrap again, forward
         m.frame_refused(
@@ -1490,10 +1553,10 @@ mod tests {
             twin.total_angle_deg().unwrap(),
         );
         assert_eq!(total, twin_total);
-        // 100° plus the way from 0xFFF8 round to 0x0004: 7 codes up to 0xFFFF (+12.5 rad),
-        // the same point as 0x0000 (−12.5 rad), then 4: 11 codes of 25/65535 rad.
-        let expected = 100.0 + rad_to_deg(11.0 * 25.0 / 65535.0);
-        assert!((total - expected).abs() < 1e-3, "{total} vs {expected}");
+        // 100° plus the way from 0x0010 round to 0x0004: 65519 codes up to 0xFFFF (+12.5
+        // rad), the same point as 0x0000 (−12.5 rad), then 4: 65523 codes of 25/65535 rad.
+        let expected = 100.0 + rad_to_deg(65523.0 * 25.0 / 65535.0);
+        assert!((total - expected).abs() < 0.01, "{total} vs {expected}");
         assert_eq!(m.angle_deg(), twin.angle_deg());
         // FE goes out on the next tick and clears the count then.
         assert_eq!(packed(&m, T0), special(0xFE));

@@ -333,8 +333,9 @@ impl<F: ReceiverFrame, const N: usize> FrameReceiver<F, N> {
     }
 
     /// Feeds a whole frame received at `now`. A frame in which the receiver reports failsafe
-    /// sends the outputs neutral (or to the failsafe frame) at once; one it flags as a repeat of old values
-    /// ([`ReceiverFrame::frame_lost`]) does not restart the timeout ([`Link::hold`]).
+    /// sends the outputs neutral (or to the failsafe frame) at once; one it flags as a repeat
+    /// of old values ([`ReceiverFrame::frame_lost`]) does not restart the timeout
+    /// ([`Link::hold`]).
     pub fn push_frame(&mut self, bytes: &[u8], now: Instant) -> Result<F, F::Error> {
         let parsed = F::parse(bytes);
         match &parsed {
