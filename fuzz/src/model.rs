@@ -851,36 +851,6 @@ impl Harness<'_> {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::ops::decode_all;
-
-    /// The committed seeds run clean and bring every motor online at some point, so fuzzing
-    /// starts from a robot that is really driven.
-    #[test]
-    fn seeds_run_clean_and_drive_every_motor() {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/corpus/bus_dispatch");
-        let fleet = Fleet::new();
-        let mut ever = vec![false; fleet.motors().len()];
-        let mut seeds = 0;
-        for entry in std::fs::read_dir(dir).expect("seed corpus") {
-            let bytes = std::fs::read(entry.expect("entry").path()).expect("seed");
-            let fleet = Fleet::new();
-            let mut h = Harness::new(&fleet);
-            for op in decode_all(&bytes) {
-                h.run(&op);
-                for (e, on) in ever.iter_mut().zip(h.online()) {
-                    *e |= on;
-                }
-            }
-            seeds += 1;
-        }
-        assert!(seeds >= 1);
-        assert!(ever.iter().all(|e| *e), "motors never online: {ever:?}");
-    }
-}
-
 /// Forwards to the transport and records the frames it refused.
 struct Recording<'a> {
     inner: &'a mut TxQueue<3>,
@@ -909,5 +879,35 @@ fn opposite(special: DmSpecial) -> Option<DmSpecial> {
         DmSpecial::Enable => Some(DmSpecial::Disable),
         DmSpecial::Disable => Some(DmSpecial::Enable),
         DmSpecial::SaveZero | DmSpecial::ClearError => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ops::decode_all;
+
+    /// The committed seeds run clean and bring every motor online at some point, so fuzzing
+    /// starts from a robot that is really driven.
+    #[test]
+    fn seeds_run_clean_and_drive_every_motor() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/corpus/bus_dispatch");
+        let fleet = Fleet::new();
+        let mut ever = vec![false; fleet.motors().len()];
+        let mut seeds = 0;
+        for entry in std::fs::read_dir(dir).expect("seed corpus") {
+            let bytes = std::fs::read(entry.expect("entry").path()).expect("seed");
+            let fleet = Fleet::new();
+            let mut h = Harness::new(&fleet);
+            for op in decode_all(&bytes) {
+                h.run(&op);
+                for (e, on) in ever.iter_mut().zip(h.online()) {
+                    *e |= on;
+                }
+            }
+            seeds += 1;
+        }
+        assert!(seeds >= 1);
+        assert!(ever.iter().all(|e| *e), "motors never online: {ever:?}");
     }
 }
