@@ -1439,53 +1439,74 @@ mod tests {
 
     #[test]
     fn enable_and_disable_asked_for_in_turn_end_as_the_last_one_asked() {
-        let online = || {
+        use DmSpecial::{ClearError, Disable, Enable};
+        /// A frame expected on a tick.
+        #[derive(Debug)]
+        enum Want {
+            /// The special with this last byte.
+            Special(u8),
+            /// The zero-torque MIT command (Disabled mode).
+            ZeroTorque,
+            /// An MIT command (not a special).
+            Mit,
+        }
+        use Want::{Mit, Special, ZeroTorque};
+        // Each case: a special packed first and refused (if any), the specials asked for
+        // after it, then the frames of the next ticks.
+        let cases: [(Option<DmSpecial>, &[DmSpecial], &[Want]); 4] = [
+            // Disable, Enable, Disable before a tick: FD once (FD then FC would leave the
+            // motor enabled while the driver is in Disabled mode).
+            (
+                None,
+                &[Disable, Enable, Disable],
+                &[Special(0xFD), ZeroTorque],
+            ),
+            // FD packed, then Enable and Disable asked for before the refusal is known: FD
+            // once.
+            (
+                Some(Disable),
+                &[Enable, Disable],
+                &[Special(0xFD), ZeroTorque],
+            ),
+            // FD packed, then Enable asked for: the refused FD is superseded, FC goes.
+            (Some(Disable), &[Enable], &[Special(0xFC), Mit]),
+            // FB packed, then Enable and ClearError asked for: FB first again, then FC (FC
+            // before FB would reach a motor whose fault is still latched).
+            (
+                Some(ClearError),
+                &[Enable, ClearError],
+                &[Special(0xFB), Special(0xFC)],
+            ),
+        ];
+        for (first, asked, expected) in cases {
             let m = DmMotor::new(0x01, DmConfig::new(0x11)).unwrap();
             m.update_feedback(&feedback(1, 1, 0x7FFF, 0x7FF, 0x7FF, 30, 30), T0)
                 .unwrap();
-            m
-        };
-        let refuse = |m: &DmMotor, code: u8| {
-            m.frame_refused(
-                &CanFrame::standard(0x01, &special(code)).unwrap(),
-                SendError::BusOff,
-            )
-        };
-        // Disable, Enable, Disable before a tick: FD once (FD then FC would leave the motor
-        // enabled while the driver is in Disabled mode).
-        let m = online();
-        m.send_special(DmSpecial::Disable);
-        m.send_special(DmSpecial::Enable);
-        m.send_special(DmSpecial::Disable);
-        assert_eq!(packed(&m, T0), special(0xFD));
-        assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
-        // FD packed, then Enable and Disable asked for before the refusal is known: FD once.
-        let m = online();
-        m.send_special(DmSpecial::Disable);
-        assert_eq!(packed(&m, T0), special(0xFD));
-        m.send_special(DmSpecial::Enable);
-        m.send_special(DmSpecial::Disable);
-        refuse(&m, 0xFD);
-        assert_eq!(packed(&m, T0), special(0xFD));
-        assert_eq!(packed(&m, T0), ZERO_TORQUE_BYTES);
-        // FD packed, then Enable asked for: the refused FD is superseded, FC goes.
-        let m = online();
-        m.send_special(DmSpecial::Disable);
-        assert_eq!(packed(&m, T0), special(0xFD));
-        m.send_special(DmSpecial::Enable);
-        refuse(&m, 0xFD);
-        assert_eq!(packed(&m, T0), special(0xFC));
-        assert_ne!(packed(&m, T0)[..7], [0xFF; 7]);
-        // FB packed, then Enable and ClearError asked for: FB first again, then FC (FC
-        // before FB would reach a motor whose fault is still latched).
-        let m = online();
-        m.send_special(DmSpecial::ClearError);
-        assert_eq!(packed(&m, T0), special(0xFB));
-        m.send_special(DmSpecial::Enable);
-        m.send_special(DmSpecial::ClearError);
-        refuse(&m, 0xFB);
-        assert_eq!(packed(&m, T0), special(0xFB));
-        assert_eq!(packed(&m, T0), special(0xFC));
+            let first_bytes = first.map(|sp| {
+                m.send_special(sp);
+                let bytes = packed(&m, T0);
+                assert_eq!(bytes, sp.bytes());
+                bytes
+            });
+            for &sp in asked {
+                m.send_special(sp);
+            }
+            if let Some(bytes) = first_bytes {
+                m.frame_refused(
+                    &CanFrame::standard(0x01, &bytes).unwrap(),
+                    SendError::BusOff,
+                );
+            }
+            for want in expected {
+                let got = packed(&m, T0);
+                let case = format!("{first:?} then {asked:?}: {want:?}");
+                match want {
+                    Special(code) => assert_eq!(got, special(*code), "{case}"),
+                    ZeroTorque => assert_eq!(got, ZERO_TORQUE_BYTES, "{case}"),
+                    Mit => assert_ne!(got[..7], [0xFF; 7], "{case}"),
+                }
+            }
+        }
     }
 
     #[test]
