@@ -639,3 +639,59 @@ fn a_jammed_shaft_freed_moves_to_its_angle_as_a_fresh_step_does() {
         assert!((end - 30.0).abs() < 0.2, "ended at {end}°");
     }
 }
+
+#[test]
+fn gm6020_voltage_feed_forward_holds_its_load_without_the_integral() {
+    use rc10_core::bus::BusBuilder;
+    use rc10_core::motor::Motor;
+    use rc10_core::motor::dji::DjiMotor;
+    use rc10_core::node::TxBatch;
+    use rc10_core::time::Instant;
+    use rc10_sim::plant::DjiEsc;
+
+    // A gimbal pitch pulled down by 0.5 N·m, told to hold still (0 rpm) with a feed-forward
+    // of that torque. The plant turns volts into torque by the GM6020's published
+    // torque–speed line (at 24 V: 320 rpm free, 156 rpm less per N·m), so at standstill
+    // 24 V holds 320 / 156 N·m: the feed-forward is 0.5 · 24 · 156 / 320 = 5.85 V, and
+    // with it the arm neither sags nor needs the speed loop's integral to hold it.
+    const LOAD_NM: f64 = 0.5;
+    let motor = DjiMotor::gm6020_voltage(1).unwrap();
+    let mut builder = BusBuilder::<1>::new();
+    builder.register(&motor).unwrap();
+    let bus = builder.build();
+    let load = Load {
+        torque_nm: LOAD_NM,
+        ..Load::default()
+    };
+    let mut esc = DjiEsc::new(MotorParams::gm6020_voltage(), 1, load, 0);
+    motor.set_feed_forward_torque_nm(LOAD_NM as f32).unwrap();
+    motor.set_target_rpm(0.0).unwrap();
+
+    let mut batch = TxBatch::new();
+    let mut sag_deg = 0.0f64;
+    for ms in 0..1000u64 {
+        let now = Instant::from_millis(ms);
+        if let Some(frame) = esc.feedback_frame() {
+            bus.dispatch(&frame, now);
+        }
+        bus.tick(now, 0.001, &mut batch);
+        for frame in batch.frames() {
+            esc.on_frame(frame);
+        }
+        for step in 0..5 {
+            esc.step(ms * 1000 + step * 200, 200e-6);
+        }
+        sag_deg = sag_deg.max(-esc.total_angle_deg());
+    }
+    let terms = motor.speed_loop_terms();
+    assert!(
+        (terms.ff - 5.85).abs() < 1e-3,
+        "feed-forward {} V",
+        terms.ff
+    );
+    // Without the right feed-forward the integral has to make up the rest (4.6 V with the
+    // phase resistance's 2.4 V/(N·m)), and the arm sags while it winds up.
+    assert!(terms.i.abs() < 0.3, "integral {} V", terms.i);
+    assert!(sag_deg < 0.2, "sagged {sag_deg}°");
+    assert!(motor.speed_rpm().abs() < 1.0, "{} rpm", motor.speed_rpm());
+}

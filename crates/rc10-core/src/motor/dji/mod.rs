@@ -156,9 +156,13 @@ impl DjiModel {
         }
     }
 
-    /// Phase resistance in ohms (GM6020 user guide: 1.8 Ω), used to turn a feed-forward torque
-    /// into volts at standstill in voltage mode.
-    const GM6020_RESISTANCE_OHM: f32 = 1.8;
+    /// Volts per N·m a GM6020 in voltage mode makes at standstill, from its published
+    /// torque–speed line (GM6020 user guide: at 24 V, 320 rpm with no load and 156 rpm less per
+    /// N·m): the line reaches 0 rpm at 320 / 156 = 2.05 N·m, so 24 V holds 2.05 N·m and a
+    /// torque takes `τ · 24 · 156 / 320` = 11.7 V/(N·m). Used to turn a feed-forward torque into
+    /// volts. (The guide's 1.8 Ω phase resistance with its 0.741 N·m/A would give 2.4 V/(N·m):
+    /// a stall torque at 24 V of 9.9 N·m, which the motor's own curve does not show.)
+    const GM6020_STANDSTILL_VOLTS_PER_NM: f32 = 24.0 * 156.0 / 320.0;
 
     /// Whether the ESC reports temperature in D6.
     pub const fn reports_temperature(self) -> bool {
@@ -911,14 +915,14 @@ impl Motor for DjiMotor {
     }
 
     /// Current-mode ESCs: through the torque constant, in amps. GM6020 in voltage mode: the
-    /// voltage that drives that torque's current through the 1.8 Ω winding at standstill
-    /// (`V = τ / kt · R`), right for holding a gimbal pitch against gravity.
+    /// voltage that makes that torque at standstill on the motor's published torque–speed
+    /// line, 11.7 V per N·m (24 V holds 320 / 156 = 2.05 N·m), right for holding a gimbal
+    /// pitch against gravity.
     fn set_feed_forward_torque_nm(&self, torque_nm: f32) -> Result<(), TargetError> {
-        let amps = torque_nm / self.model.torque_constant_nm_per_amp();
         let command = if self.model.is_voltage_mode() {
-            amps * DjiModel::GM6020_RESISTANCE_OHM
+            torque_nm * DjiModel::GM6020_STANDSTILL_VOLTS_PER_NM
         } else {
-            amps
+            torque_nm / self.model.torque_constant_nm_per_amp()
         };
         self.set_feed_forward(command)
     }

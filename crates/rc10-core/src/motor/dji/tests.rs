@@ -672,12 +672,14 @@ fn feed_forward_torque_holds_in_speed_mode() {
     m.set_feed_forward_torque_nm(0.6).unwrap();
     m.set_target_rpm(0.0).unwrap();
     assert_eq!(slot0(&tick(&m, T0)), 3333);
-    // GM6020 voltage mode: 0.741 N·m → 1 A through 1.8 Ω = 1.8 V = 2250 counts.
+    // GM6020 voltage mode, from the published torque–speed line: at 24 V it stalls at
+    // 320 rpm / 156 rpm/(N·m) = 2.05 N·m, so 1 N·m takes 24 · 156 / 320 = 11.7 V = 14625
+    // counts (30000 ↔ 24 V).
     let g = DjiMotor::gm6020_voltage(1).unwrap();
     online_id(&g, 0x205);
-    g.set_feed_forward_torque_nm(0.741).unwrap();
+    g.set_feed_forward_torque_nm(1.0).unwrap();
     g.set_target_rpm(0.0).unwrap();
-    assert_eq!(slot0(&tick(&g, T0)), 2250);
+    assert_eq!(slot0(&tick(&g, T0)), 14625);
     // Not in open-loop modes.
     m.set_target_current(1.0).unwrap();
     assert_eq!(slot0(&tick(&m, T0)), 1000);
