@@ -1,10 +1,10 @@
 //! PPM (RC10_LIB's AirJoy): any sequence of pulse intervals with arrival times to an 8- and
 //! a 2-channel receiver.
 //!
-//! Input: operations (tag byte): an interval (a channel width 800–2200 µs, a sync gap, or any
+//! Input: operations (tag byte): an interval (a channel width 750–2250 µs, a sync gap, or any
 //! u32), time moving on, or reading the signal later.
 //!
-//! Invariants (PPM: channels 800–2200 µs between sync gaps of at least 2700 µs): no panic; a
+//! Invariants (PPM: channels 750–2250 µs between sync gaps of at least 2700 µs): no panic; a
 //! frame is reported exactly when a sync ends a run of exactly N channel widths that began
 //! with a sync, and holds those widths; an interval that is neither a width nor a sync is
 //! reported as such; a run of the wrong length is reported with its length; the signal is
@@ -26,7 +26,7 @@ fuzz_target!(|data: &[u8]| {
     while !u.is_empty() {
         let tag = u8::arbitrary(&mut u).unwrap_or(0);
         let interval = match tag % 8 {
-            0..=4 => 800 + u32::from(u16::arbitrary(&mut u).unwrap_or(0) % 1401),
+            0..=4 => 750 + u32::from(u16::arbitrary(&mut u).unwrap_or(0) % 1501),
             5 => 2700 + u32::from(u16::arbitrary(&mut u).unwrap_or(0)),
             6 => u32::arbitrary(&mut u).unwrap_or(0),
             _ => {
@@ -57,7 +57,7 @@ const MIN_SYNC: u32 = 2700;
 const DEADBANDS: [f32; 7] = [0.0, 0.05, 0.99, 1.0, -1.0, f32::NAN, f32::INFINITY];
 
 fn is_width(us: u32) -> bool {
-    (800..=2200).contains(&us)
+    (750..=2250).contains(&us)
 }
 
 impl<const N: usize> Rx<N> {

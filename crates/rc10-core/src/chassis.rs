@@ -12,7 +12,7 @@
 //!
 //! ```
 //! use rc10_core::chassis::{LinearChassis, MecanumConfig, Twist};
-//! // 0.4 m wheelbase, 0.36 m track, 76 mm wheels (RoboMaster standard chassis).
+//! // 0.4 m wheelbase, 0.36 m track, wheels of 76 mm radius (RoboMaster standard chassis).
 //! let chassis = LinearChassis::mecanum(MecanumConfig::new(0.4, 0.36, 0.076)).unwrap();
 //! let rpm = chassis.wheel_rpm(Twist::new(1.0, 0.0, 0.0)); // 1 m/s forward
 //! // v / r = 1 / 0.076 rad/s = 125.65 rpm on every wheel.
@@ -1079,7 +1079,7 @@ mod tests {
 
     #[test]
     fn a_twist_too_large_for_f32_wheel_speeds_gives_zeros() {
-        // 1e37 m/s on a 76 mm wheel is about 1.3e39 rpm: beyond f32, so no wheel gets an
+        // 1e37 m/s on a wheel of 76 mm radius is about 1.3e39 rpm: beyond f32, so no wheel gets an
         // infinity (or, scaled to a limit, a NaN).
         let c = rm_chassis();
         assert_eq!(c.wheel_rpm(Twist::new(1e37, 0.0, 0.0)), [0.0; 4]);

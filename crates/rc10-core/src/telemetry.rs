@@ -67,7 +67,8 @@ pub fn justfloat(values: &[f32], out: &mut [u8]) -> Result<usize, BufferTooSmall
 /// empty), with `decimals` digits after the point (at most [`MAX_DECIMALS`]; more are taken
 /// as that); returns the bytes written. NaN and infinities are written as `nan`, `inf` and
 /// `-inf`. The prefix is written as it is: it must not contain `:`, `,` or a line break,
-/// which would split the line differently in VOFA+.
+/// which would split the line differently in VOFA+, nor be `image`, which VOFA+ takes as the
+/// header of a picture.
 pub fn firewater(
     prefix: &str,
     values: &[f32],

@@ -4,7 +4,9 @@
 //! Layout (little-endian bit fields): channels 0–3 are 11 bits each from byte 0 (right stick
 //! x, right stick y, left stick x, left stick y; 364…1684, centre 1024, accepted up to ±700
 //! around the centre as DJI's own examples do); byte 5 bits 4–5 the
-//! right switch, bits 6–7 the left switch (1 up, 3 middle, 2 down); bytes 6–11 mouse x, y, z
+//! right switch, bits 6–7 the left switch (1 up, 3 middle, 2 down; HNU's basic_framework and
+//! RoboMaster's RoboRTS-Firmware read them so; a comment in DJI's development-board examples
+//! calls bits 4–5 "Switch left", which is not the switch they are); bytes 6–11 mouse x, y, z
 //! (i16); bytes 12–13 mouse buttons; bytes 14–15 the keyboard bit mask; bytes 16–17 the wheel
 //! (11 bits, on newer receivers).
 

@@ -5,10 +5,12 @@ use super::{Link, Signal, normalize};
 use crate::time::{Duration, Instant};
 use core::fmt;
 
-/// Shortest interval accepted as a channel, µs.
-pub const MIN_CHANNEL_US: u32 = 800;
-/// Longest interval accepted as a channel, µs.
-pub const MAX_CHANNEL_US: u32 = 2200;
+/// Shortest interval accepted as a channel, µs: the bound flight controllers' PPM inputs use
+/// (Cleanflight and its descendants), so a transmitter whose endpoints are set beyond 100 %
+/// still decodes at full throw.
+pub const MIN_CHANNEL_US: u32 = 750;
+/// Longest interval accepted as a channel, µs (see [`MIN_CHANNEL_US`]).
+pub const MAX_CHANNEL_US: u32 = 2250;
 /// Intervals at least this long are the sync gap between frames, µs.
 pub const MIN_SYNC_US: u32 = 2700;
 
@@ -188,6 +190,30 @@ mod tests {
         );
         assert_eq!(train(&mut rx, &ok, t).unwrap().unwrap()[7], 1800);
         assert_eq!(rx.link().errors(), 1);
+    }
+
+    #[test]
+    fn endpoints_beyond_100_percent_decode_up_to_750_and_2250_us() {
+        // A transmitter with its endpoints at about 150 % sends 750 µs at one end of the stick
+        // and 2250 µs at the other; they read as full throw. One µs further is noise.
+        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
+        let t = Instant::from_millis(1);
+        rx.push_interval(6000, t);
+        let wide = [750, 2250, 1500, 1500, 1500, 1500, 1500, 1500];
+        assert_eq!(
+            train(&mut rx, &wide, t),
+            Some(Ok([750, 2250, 1500, 1500, 1500, 1500, 1500, 1500]))
+        );
+        assert_eq!(rx.channel(0, t, 0.0), -1.0);
+        assert_eq!(rx.channel(1, t, 0.0), 1.0);
+        for noise in [749, 2251] {
+            let mut frame = wide;
+            frame[4] = noise;
+            assert_eq!(
+                train(&mut rx, &frame, t),
+                Some(Err(PpmError::BadInterval(noise)))
+            );
+        }
     }
 
     #[test]

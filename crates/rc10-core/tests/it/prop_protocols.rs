@@ -958,22 +958,22 @@ enum PpmFrame {
 
 fn ppm_frame() -> impl Strategy<Value = PpmFrame> {
     let channels = [
-        800u16..=2200,
-        800u16..=2200,
-        800u16..=2200,
-        800u16..=2200,
-        800u16..=2200,
-        800u16..=2200,
-        800u16..=2200,
-        800u16..=2200,
+        750u16..=2250,
+        750u16..=2250,
+        750u16..=2250,
+        750u16..=2250,
+        750u16..=2250,
+        750u16..=2250,
+        750u16..=2250,
+        750u16..=2250,
     ];
     prop_oneof![
         6 => channels.clone().prop_map(PpmFrame::Good),
-        1 => (channels, 0usize..8, prop_oneof![0u32..800, 2201u32..2700])
+        1 => (channels, 0usize..8, prop_oneof![0u32..750, 2251u32..2700])
             .prop_map(|(c, i, bad)| PpmFrame::Noise(c, i, bad)),
         1 => prop_oneof![
-            proptest::collection::vec(800u16..=2200, 1..8),
-            proptest::collection::vec(800u16..=2200, 9..12),
+            proptest::collection::vec(750u16..=2250, 1..8),
+            proptest::collection::vec(750u16..=2250, 9..12),
         ].prop_map(PpmFrame::WrongCount),
     ]
 }
