@@ -691,7 +691,12 @@ fn gm6020_voltage_feed_forward_holds_its_load_without_the_integral() {
     );
     // Without the right feed-forward the integral has to make up the rest (4.6 V with the
     // phase resistance's 2.4 V/(N·m)), and the arm sags while it winds up.
-    assert!(terms.i.abs() < 0.3, "integral {} V", terms.i);
-    assert!(sag_deg < 0.2, "sagged {sag_deg}°");
+    // The plant's static friction (0.01 N·m) lets the shaft rest with the integral anywhere
+    // within ±0.01 · 11.7 = ±0.12 V.
+    assert!(terms.i.abs() < 0.12, "integral {} V", terms.i);
+    // Before the first command the arm falls freely for up to 1 ms:
+    // ½ · (0.49 N·m / 1.8e-4 kg·m²) · (1 ms)² = 1.4 mrad = 0.078°; twice that lets the speed
+    // loop catch it.
+    assert!(sag_deg < 0.16, "sagged {sag_deg}°");
     assert!(motor.speed_rpm().abs() < 1.0, "{} rpm", motor.speed_rpm());
 }

@@ -97,9 +97,10 @@ pub async fn sbus_task(
 /// is soon after the edge; in thread mode another task's run time would add to it. Even there
 /// an edge that comes during a scheduler tick is timed when the tick ends (10–20 µs later per
 /// bus: a few percent of a stick's 1000 µs span, for that one frame), and an edge that comes
-/// before the task has re-armed the line is missed: two channels then read as one interval
-/// too long for a channel (noise, or a false sync gap), and the decoder drops that frame (and
-/// the next, after a false sync). Timer input capture would give
+/// before the task has re-armed the line is missed: two channels then read as one interval,
+/// which is a channel (two short ones add up to at most 2250 µs; the frame then has one
+/// channel too few), noise, or a false sync gap, and the decoder drops that frame (and the
+/// next, after a false sync). Timer input capture would give
 /// hardware edge times; this adapter does not use it yet.
 #[embassy_executor::task]
 pub async fn ppm_task(

@@ -194,8 +194,8 @@ mod tests {
 
     #[test]
     fn endpoints_beyond_100_percent_decode_up_to_750_and_2250_us() {
-        // A transmitter with its endpoints at about 150 % sends 750 µs at one end of the stick
-        // and 2250 µs at the other; they read as full throw. One µs further is noise.
+        // A transmitter with its endpoints at 150 % of ±500 µs sends 750 µs at one end of the
+        // stick and 2250 µs at the other; they read as full throw. One µs further is noise.
         let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
         let t = Instant::from_millis(1);
         rx.push_interval(6000, t);

@@ -160,8 +160,15 @@ impl DjiModel {
     /// torque–speed line (GM6020 user guide: at 24 V, 320 rpm with no load and 156 rpm less per
     /// N·m): the line reaches 0 rpm at 320 / 156 = 2.05 N·m, so 24 V holds 2.05 N·m and a
     /// torque takes `τ · 24 · 156 / 320` = 11.7 V/(N·m). Used to turn a feed-forward torque into
-    /// volts. (The guide's 1.8 Ω phase resistance with its 0.741 N·m/A would give 2.4 V/(N·m):
-    /// a stall torque at 24 V of 9.9 N·m, which the motor's own curve does not show.)
+    /// volts. Derived from published figures, not measured on a motor: the guide's 1.8 Ω
+    /// phase resistance with its 0.741 N·m/A would give 2.4 V/(N·m) instead (a stall torque
+    /// at 24 V of 9.9 N·m, which the published curve does not show), and the two cannot both
+    /// hold. The torque–speed line describes the motor with its driver, as the command drives
+    /// it; the simulator's plant uses the same line. To check it on a motor, hold the shaft
+    /// and compare the volts commanded with the torque current it reports (D4–5): about
+    /// 8.7 Ω (11.7 V/(N·m) · 0.741 N·m/A) confirms it. The volts assume the rated 24 V supply
+    /// behind the 30000 ↔ 24 V scale: on a battery a few volts off, the speed loop's integral
+    /// makes up the difference.
     const GM6020_STANDSTILL_VOLTS_PER_NM: f32 = 24.0 * 156.0 / 320.0;
 
     /// Whether the ESC reports temperature in D6.
