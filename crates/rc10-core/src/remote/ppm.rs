@@ -172,11 +172,17 @@ mod tests {
         rx.push_interval(6000, now).or(last)
     }
 
-    #[test]
-    fn frames_between_syncs_decode_and_noise_drops_one_frame() {
+    /// An 8-channel receiver (100 ms timeout) that has seen a sync gap at 1 ms, and that time.
+    fn synced() -> (PpmReceiver<8>, Instant) {
         let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
         let t = Instant::from_millis(1);
         rx.push_interval(6000, t);
+        (rx, t)
+    }
+
+    #[test]
+    fn frames_between_syncs_decode_and_noise_drops_one_frame() {
+        let (mut rx, t) = synced();
         let ok = [1100, 1200, 1300, 1400, 1500, 1600, 1700, 1800];
         assert_eq!(
             train(&mut rx, &ok, t),
@@ -196,9 +202,7 @@ mod tests {
     fn endpoints_beyond_100_percent_decode_up_to_750_and_2250_us() {
         // A transmitter with its endpoints at 150 % of ±500 µs sends 750 µs at one end of the
         // stick and 2250 µs at the other; they read as full throw. One µs further is noise.
-        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
-        let t = Instant::from_millis(1);
-        rx.push_interval(6000, t);
+        let (mut rx, t) = synced();
         let wide = [750, 2250, 1500, 1500, 1500, 1500, 1500, 1500];
         assert_eq!(
             train(&mut rx, &wide, t),
@@ -260,9 +264,7 @@ mod tests {
 
     #[test]
     fn short_frame_is_rejected() {
-        let mut rx = PpmReceiver::<8>::new(Duration::from_millis(100));
-        let t = Instant::from_millis(1);
-        rx.push_interval(6000, t);
+        let (mut rx, t) = synced();
         assert_eq!(
             train(&mut rx, &[1500; 6], t),
             Some(Err(PpmError::WrongChannelCount(6)))
