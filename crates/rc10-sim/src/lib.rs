@@ -9,7 +9,8 @@
 //!   ([`scenario::soak`]);
 //! - [`file`](mod@file): scenario files in TOML;
 //! - [`metrics`]: step-response figures and the full-current minimum rise time;
-//! - [`output`]: metrics table, CSV traces, SVG plots.
+//! - [`output`]: metrics table, CSV traces, SVG plots;
+//! - [`sweep`]: a scenario run for every combination of candidate loop gains, ranked.
 //!
 //! ```
 //! use rc10_sim::scenario::{builtin, run};
@@ -28,6 +29,7 @@ pub mod metrics;
 pub mod output;
 pub mod plant;
 pub mod scenario;
+pub mod sweep;
 /// The small-vector crate [`scenario::MotorSamples`] is built on, for code that builds samples.
 pub use smallvec;
 #[cfg(test)]

@@ -1,10 +1,11 @@
 //! `rc10-sim`: run a simulated robot and show how its motors respond.
 #![forbid(unsafe_code)]
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
 use rc10_sim::metrics::min_speed_rise_time_s;
 use rc10_sim::plant::MotorParams;
 use rc10_sim::scenario::{Scenario, TargetKind, builtin, builtin_named, run_with_progress, soak};
+use rc10_sim::sweep::{self, GainGrid, Loop, SweepSpec};
 use rc10_sim::{output, scenario};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -21,8 +22,62 @@ struct Cli {
 enum Command {
     /// Run a scenario (default: m3508-speed-step) and write its trace and plot.
     Run(RunArgs),
+    /// Run a scenario once for every combination of candidate gains of one motor's speed or
+    /// angle loop (on every core) and rank the runs by how well the motor followed its steps.
+    Sweep(SweepArgs),
     /// List the built-in scenarios.
     List,
+}
+
+/// The loop a sweep tunes.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum LoopArg {
+    /// The speed loop (rpm in, amps or volts out).
+    Speed,
+    /// The angle loop (degrees in, rpm out).
+    Angle,
+}
+
+#[derive(Debug, Parser)]
+struct SweepArgs {
+    /// Built-in scenario name (see `list`) or a scenario file (`*.toml`).
+    #[arg(default_value = "m3508-speed-step")]
+    scenario: String,
+    /// The motor whose loop is tuned, 1 for the scenario's first (default: the first motor with
+    /// a speed or angle step).
+    #[arg(long)]
+    motor: Option<usize>,
+    /// Which loop (default: angle if the motor has an angle target, else speed).
+    #[arg(long = "loop", value_enum)]
+    tuned: Option<LoopArg>,
+    /// Candidate proportional gains: comma-separated numbers and FROM:TO:COUNT ranges, e.g.
+    /// `0.2:1.0:5,1.5` (default: the scenario's gain).
+    #[arg(long, allow_hyphen_values = true)]
+    kp: Option<String>,
+    /// Candidate integral gains, per second (as --kp).
+    #[arg(long, allow_hyphen_values = true)]
+    ki: Option<String>,
+    /// Candidate derivative gains, times seconds (as --kp).
+    #[arg(long, allow_hyphen_values = true)]
+    kd: Option<String>,
+    /// The largest overshoot, percent of the step, a run may have and qualify.
+    #[arg(long, default_value_t = 5.0)]
+    max_overshoot: f64,
+    /// How many of the best runs to print.
+    #[arg(long, default_value_t = 10)]
+    top: usize,
+    /// Threads (default: one per core).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Simulated duration of each run in ms (default: the scenario's).
+    #[arg(long)]
+    duration_ms: Option<u64>,
+    /// Seed for everything random.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Output folder for sweep.csv (every run's gains and figures).
+    #[arg(long, default_value = "sim-out")]
+    out: PathBuf,
 }
 
 #[derive(Debug, Parser)]
@@ -66,9 +121,10 @@ fn find(name: &str) -> Result<Scenario, String> {
     })
 }
 
-fn run_cmd(args: RunArgs) -> Result<(), String> {
-    let mut scenario = find(&args.scenario)?;
-    if let Some(d) = args.duration_ms {
+/// The scenario named `name`, with the duration and seed given on the command line.
+fn find_with(name: &str, duration_ms: Option<u64>, seed: Option<u64>) -> Result<Scenario, String> {
+    let mut scenario = find(name)?;
+    if let Some(d) = duration_ms {
         if !(1..=rc10_sim::file::MAX_DURATION_MS).contains(&d) {
             return Err(format!(
                 "--duration-ms must be 1 to {} (a day)",
@@ -77,9 +133,14 @@ fn run_cmd(args: RunArgs) -> Result<(), String> {
         }
         scenario.duration_ms = d;
     }
-    if let Some(s) = args.seed {
+    if let Some(s) = seed {
         scenario.seed = s;
     }
+    Ok(scenario)
+}
+
+fn run_cmd(args: RunArgs) -> Result<(), String> {
+    let scenario = find_with(&args.scenario, args.duration_ms, args.seed)?;
     let started = std::time::Instant::now();
     let total_ms = scenario.duration_ms;
     let mut progress = |t_ms: u64| {
@@ -131,6 +192,98 @@ fn run_cmd(args: RunArgs) -> Result<(), String> {
         scenario.duration_ms as f64 * 1e-3 / wall.max(1e-9),
         wall,
         scenario.duration_ms
+    ));
+    Ok(())
+}
+
+fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
+    let scenario = find_with(&args.scenario, args.duration_ms, args.seed)?;
+    let motor = match args.motor {
+        Some(0) => return Err("--motor counts from 1".into()),
+        Some(n) => n - 1,
+        // The first motor with a step to measure (the sweep says so if there is none).
+        None => scenario
+            .targets
+            .iter()
+            .find(|t| t.kind != TargetKind::Current && !t.steps.is_empty())
+            .map_or(0, |t| t.motor),
+    };
+    let tuned = match args.tuned {
+        Some(LoopArg::Speed) => Loop::Speed,
+        Some(LoopArg::Angle) => Loop::Angle,
+        None => sweep::default_loop(&scenario, motor),
+    };
+    if !(args.max_overshoot.is_finite() && args.max_overshoot >= 0.0) {
+        return Err("--max-overshoot must be a percentage of 0 or more".into());
+    }
+    let values = |flag: &str, text: &Option<String>| match text {
+        Some(t) => sweep::parse_values(t).map_err(|e| format!("--{flag}: {e}")),
+        None => Ok(Vec::new()),
+    };
+    let grid = GainGrid {
+        kp: values("kp", &args.kp)?,
+        ki: values("ki", &args.ki)?,
+        kd: values("kd", &args.kd)?,
+    };
+    let count = |v: &Vec<f32>| v.len().max(1);
+    let runs = count(&grid.kp)
+        .saturating_mul(count(&grid.ki))
+        .saturating_mul(count(&grid.kd));
+    let jobs = args.jobs.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    if jobs == 0 {
+        return Err("--jobs must be 1 or more".into());
+    }
+    let spec = SweepSpec {
+        motor,
+        tuned,
+        grid,
+        max_overshoot_percent: args.max_overshoot,
+    };
+    say(&format!(
+        "sweep     {}, motor {}, {tuned} loop: {runs} run(s) of {} ms on {} thread(s), and one with the scenario's gains\n\n",
+        scenario.name,
+        motor + 1,
+        scenario.duration_ms,
+        jobs.min(runs)
+    ));
+    let started = std::time::Instant::now();
+    // On a terminal only: a pipe or a log gets the table alone.
+    let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let progress = |done: usize| {
+        if terminal && runs >= 20 {
+            eprint!("\r  {done} / {runs}");
+            if done == runs {
+                eprintln!();
+            }
+        }
+    };
+    let outcome = sweep::sweep(&scenario, &spec, jobs, &progress)
+        .map_err(|e| format!("sweep of `{}`: {e}", scenario.name))?;
+    let wall = started.elapsed().as_secs_f64();
+    say(&sweep::table(&outcome, args.max_overshoot, args.top));
+    let qualified = outcome
+        .runs
+        .iter()
+        .filter(|r| r.qualifies(args.max_overshoot))
+        .count();
+    say(&format!(
+        "\nqualified {qualified} of {} runs (every step settles within +/-2 %, overshoot <= {} %)\n",
+        outcome.runs.len(),
+        args.max_overshoot
+    ));
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| format!("creating {}: {e}", args.out.display()))?;
+    let csv = args.out.join("sweep.csv");
+    sweep::write_csv(&outcome, args.max_overshoot, &csv)
+        .map_err(|e| format!("writing {}: {e}", csv.display()))?;
+    say(&format!("wrote     {}\n", csv.display()));
+    let total = outcome.runs.len() + 1;
+    say(&format!(
+        "speed     {total} runs in {wall:.2} s ({:.0} runs a second, {:.0} x real time in all)\n",
+        total as f64 / wall.max(1e-9),
+        total as f64 * scenario.duration_ms as f64 * 1e-3 / wall.max(1e-9)
     ));
     Ok(())
 }
@@ -188,6 +341,7 @@ fn main() -> ExitCode {
             Ok(())
         }
         Some(Command::Run(args)) => run_cmd(args),
+        Some(Command::Sweep(args)) => sweep_cmd(args),
         None => run_cmd(RunArgs::parse_from(["run"])),
     };
     match result {

@@ -1,0 +1,91 @@
+//! The `rc10-sim` command line as a user runs it.
+#![allow(clippy::expect_used)] // test code: a binary that does not start should stop the test
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn rc10_sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rc10-sim"))
+        .args(args)
+        .output()
+        .expect("the rc10-sim binary runs")
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rc10-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn sweep_prints_the_ranking_and_writes_every_run() {
+    let dir = out_dir("sweep");
+    let o = rc10_sim(&[
+        "sweep",
+        "m3508-speed-step",
+        "--kp",
+        "0.01,0.6",
+        "--ki",
+        "0.1,8",
+        "--jobs",
+        "2",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let stdout = text(&o.stdout);
+    assert!(o.status.success(), "{stdout}{}", text(&o.stderr));
+    assert!(stdout.contains("motor 1, speed loop: 4 run(s)"), "{stdout}");
+    // The scenario's row, then the four runs best first: the shipped kp 0.6, ki 8 first
+    // (it settles within 50 ms), kp 0.01, ki 0.1 last (3 A at the step, a sixth of the
+    // C620's 20 A: it does not settle within the run).
+    let rows: Vec<&str> = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("rank"))
+        .skip(1)
+        .take_while(|l| !l.is_empty())
+        .collect();
+    assert_eq!(rows.len(), 5, "{stdout}");
+    assert!(rows[0].starts_with("scenario"), "{stdout}");
+    let gains = |row: &str| -> Vec<String> {
+        row.split_whitespace()
+            .skip(1)
+            .take(2)
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(gains(rows[1]), ["0.6", "8"], "{stdout}");
+    assert_eq!(gains(rows[4]), ["0.01", "0.1"], "{stdout}");
+    assert!(rows[4].trim_end().ends_with("no"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 5, "{csv}");
+    assert!(lines[0].starts_with("index,kp,ki,kd,qualifies,iae_rpm_s,step1_rise_ms"));
+    // Grid order: kp slowest.
+    assert!(lines[1].starts_with("0,0.01,0.1,0,0,"), "{csv}");
+    assert!(lines[4].starts_with("3,0.6,8,0,1,"), "{csv}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sweep_refuses_bad_arguments_with_a_reason() {
+    for (args, reason) in [
+        (&["sweep", "--kp", "1:2"][..], "--kp: `1:2` is neither"),
+        (&["sweep", "--motor", "0"][..], "--motor counts from 1"),
+        (&["sweep", "--motor", "2"][..], "no motor 2"),
+        (&["sweep", "--jobs", "0"][..], "--jobs must be 1 or more"),
+        (&["sweep", "--max-overshoot=-1"][..], "--max-overshoot"),
+        (
+            &["sweep", "m3508-speed-step-rc10lib", "--kp", "1"][..],
+            "RC10_LIB's demo loop",
+        ),
+    ] {
+        let o = rc10_sim(args);
+        assert!(!o.status.success(), "{args:?}");
+        let stderr = text(&o.stderr);
+        assert!(stderr.contains(reason), "{args:?}: {stderr}");
+    }
+}
