@@ -201,12 +201,8 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     let motor = match args.motor {
         Some(0) => return Err("--motor counts from 1".into()),
         Some(n) => n - 1,
-        // The first motor with a step to measure (the sweep says so if there is none).
-        None => scenario
-            .targets
-            .iter()
-            .find(|t| t.kind != TargetKind::Current && !t.steps.is_empty())
-            .map_or(0, |t| t.motor),
+        // The sweep says why if there is none to tune.
+        None => sweep::default_motor(&scenario).unwrap_or(0),
     };
     let tuned = match args.tuned {
         Some(LoopArg::Speed) => Loop::Speed,
@@ -241,26 +237,35 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
         grid,
         max_overshoot_percent: args.max_overshoot,
     };
+    // Before the runs: a long sweep should not end in a folder that cannot be made.
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| format!("creating {}: {e}", args.out.display()))?;
     say(&format!(
-        "sweep     {}, motor {}, {tuned} loop: {runs} run(s) of {} ms on {} thread(s), and one with the scenario's gains\n\n",
+        "sweep     {}, motor {}, {tuned} loop: {runs} run(s) of {} ms on {} thread(s), and one \
+         with the scenario's gains (its would-be rank in brackets)\n\n",
         scenario.name,
         motor + 1,
         scenario.duration_ms,
-        jobs.min(runs)
+        jobs.min(runs).min(sweep::MAX_JOBS)
     ));
     let started = std::time::Instant::now();
-    // On a terminal only: a pipe or a log gets the table alone.
+    // On a terminal only (a pipe or a log gets the table alone), and only ever forwards: the
+    // threads report in no set order.
     let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let shown = std::sync::atomic::AtomicUsize::new(0);
     let progress = |done: usize| {
-        if terminal && runs >= 20 {
+        if terminal
+            && runs >= 20
+            && shown.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done
+        {
             eprint!("\r  {done} / {runs}");
-            if done == runs {
-                eprintln!();
-            }
         }
     };
-    let outcome = sweep::sweep(&scenario, &spec, jobs, &progress)
-        .map_err(|e| format!("sweep of `{}`: {e}", scenario.name))?;
+    let outcome = sweep::sweep(&scenario, &spec, jobs, &progress);
+    if terminal && runs >= 20 {
+        eprintln!();
+    }
+    let outcome = outcome.map_err(|e| format!("sweep of `{}`: {e}", scenario.name))?;
     let wall = started.elapsed().as_secs_f64();
     say(&sweep::table(&outcome, args.max_overshoot, args.top));
     let qualified = outcome
@@ -269,12 +274,11 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
         .filter(|r| r.qualifies(args.max_overshoot))
         .count();
     say(&format!(
-        "\nqualified {qualified} of {} runs (every step settles within +/-2 %, overshoot <= {} %)\n",
+        "\nqualified {qualified} of {} runs (every step settles within +/-2 % before the last \
+         tenth of its window, overshoot <= {} %)\n",
         outcome.runs.len(),
         args.max_overshoot
     ));
-    std::fs::create_dir_all(&args.out)
-        .map_err(|e| format!("creating {}: {e}", args.out.display()))?;
     let csv = args.out.join("sweep.csv");
     sweep::write_csv(&outcome, args.max_overshoot, &csv)
         .map_err(|e| format!("writing {}: {e}", csv.display()))?;

@@ -3,10 +3,17 @@
 //! steps.
 //!
 //! Every run is the whole simulation (bus, plants, rc10's real drivers), deterministic: the
-//! same scenario and gains give the same figures whatever the number of threads. A run
-//! *qualifies* when each of the motor's steps settles within ±2 % of its size and overshoots
-//! by at most the given percentage; qualifying runs rank first, each group by the sum of its
-//! steps' integral of absolute error (IAE), the earlier combination first on a tie.
+//! same scenario and gains give the same figures whatever the number of threads. Each speed
+//! or angle step of the motor's target profiles is measured on the physical signal until the
+//! motor's next step (or the end of the run). A run *qualifies* when every step settles
+//! within ±2 % of its size before the last tenth of its window and overshoots by at most the
+//! given percentage; qualifying runs rank first, each group by the sum of the steps' integral
+//! of absolute error (IAE), the earlier combination first on a tie.
+//!
+//! IAE weighs error only: a loop that chatters (a large kd, say) costs current and heat that
+//! the ranking does not see; the peak current is shown beside it. Every run uses the
+//! scenario's one seed (ESC phases, random faults): gains that win by a hair may not win
+//! under another seed.
 //!
 //! ```
 //! use rc10_sim::scenario::builtin_named;
@@ -24,16 +31,18 @@
 //! assert!(best.qualifies(5.0));
 //! ```
 
-use crate::metrics::StepMetrics;
-use crate::scenario::{Controller, Scenario, SimError, TargetKind, run};
+use crate::scenario::{Controller, MeasuredStep, Scenario, SimError, TargetKind, motor_steps, run};
 use rc10_core::motor::dji::DjiConfig;
 use rc10_core::pid::{PidConfig, PidConfigError};
 use std::fmt;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-/// Most runs one sweep makes (about 10 minutes of the default 400 ms step on one core of a
-/// laptop).
+/// Most runs one sweep makes, and most values one list gives (100,000 runs of the 400 ms
+/// M3508 step take about 25 s on one thread of the machine in BENCHMARKS.md).
 pub const MAX_RUNS: usize = 100_000;
+
+/// Most threads a sweep starts, whatever it is asked for.
+pub const MAX_JOBS: usize = 256;
 
 /// Which loop of the cascade a sweep tunes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,16 +62,16 @@ impl fmt::Display for Loop {
     }
 }
 
-/// Candidate gains, each in the loop's own units (speed loop: amps or volts per rpm, per
-/// rpm·s, per rpm/s; angle loop: rpm per degree, per degree·s, per degree/s). An empty list
-/// keeps the scenario's gain.
+/// Candidate gains in the loop's own units. Speed loop: kp in A/rpm (V/rpm for a GM6020 in
+/// voltage mode), ki in A/(rpm·s), kd in A/(rpm/s). Angle loop: kp in rpm/deg, ki in
+/// rpm/(deg·s), kd in rpm/(deg/s). An empty list keeps the scenario's gain.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct GainGrid {
     /// Proportional gains.
     pub kp: Vec<f32>,
-    /// Integral gains, per second.
+    /// Integral gains.
     pub ki: Vec<f32>,
-    /// Derivative gains, times seconds.
+    /// Derivative gains.
     pub kd: Vec<f32>,
 }
 
@@ -79,48 +88,59 @@ pub struct SweepSpec {
     pub max_overshoot_percent: f64,
 }
 
-/// One loop's three gains.
+/// One loop's three gains, in the units of [`GainGrid`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gains {
     /// Proportional gain.
     pub kp: f32,
-    /// Integral gain, per second.
+    /// Integral gain.
     pub ki: f32,
-    /// Derivative gain, times seconds.
+    /// Derivative gain.
     pub kd: f32,
 }
 
 /// One run of a sweep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepRun {
-    /// Its place in the grid (kp varies slowest, kd fastest).
+    /// Its place in the grid (kp varies slowest, kd fastest); 0 for the baseline.
     pub index: usize,
     /// The gains it ran with.
     pub gains: Gains,
-    /// Step figures of each of the motor's speed and angle targets, in target order.
-    pub steps: Vec<(TargetKind, StepMetrics)>,
+    /// Every speed and angle step of the motor, in time order.
+    pub steps: Vec<MeasuredStep>,
 }
 
 impl SweepRun {
-    /// Whether every step settled within ±2 % and overshot by at most
-    /// `max_overshoot_percent`.
+    /// Whether it has steps and every one settled within ±2 % before the last tenth of its
+    /// window and overshot by at most `max_overshoot_percent`.
     pub fn qualifies(&self, max_overshoot_percent: f64) -> bool {
         !self.steps.is_empty()
-            && self.steps.iter().all(|(_, m)| {
-                m.settling_time_s.is_some() && m.overshoot_percent <= max_overshoot_percent
+            && self.steps.iter().all(|s| {
+                let settled_in_time = s
+                    .metrics
+                    .settling_time_s
+                    .is_some_and(|t| t <= 0.9e-3 * s.window_ms as f64);
+                settled_in_time && s.metrics.overshoot_percent <= max_overshoot_percent
             })
     }
 
-    /// The sum of the steps' IAE (rpm·s or degree·s): lower is better.
+    /// The sum of the steps' IAE (rpm·s or deg·s): lower is better.
     pub fn iae(&self) -> f64 {
-        self.steps.iter().map(|(_, m)| m.iae).sum()
+        self.steps.iter().map(|s| s.metrics.iae).sum()
     }
+}
+
+/// Best first: qualifying, then by IAE.
+fn better(a: &SweepRun, b: &SweepRun, max_overshoot_percent: f64) -> std::cmp::Ordering {
+    let qa = a.qualifies(max_overshoot_percent);
+    let qb = b.qualifies(max_overshoot_percent);
+    qb.cmp(&qa).then(a.iae().total_cmp(&b.iae()))
 }
 
 /// The runs of a sweep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepOutcome {
-    /// The scenario's own gains, run as they are (index 0: it is not part of the grid).
+    /// The scenario's own gains, run as they are (not part of the grid).
     pub baseline: SweepRun,
     /// Every combination, in grid order.
     pub runs: Vec<SweepRun>,
@@ -131,14 +151,19 @@ impl SweepOutcome {
     /// the earlier in the grid.
     pub fn ranked(&self, max_overshoot_percent: f64) -> Vec<&SweepRun> {
         let mut runs: Vec<&SweepRun> = self.runs.iter().collect();
-        runs.sort_by(|a, b| {
-            let qa = a.qualifies(max_overshoot_percent);
-            let qb = b.qualifies(max_overshoot_percent);
-            qb.cmp(&qa)
-                .then(a.iae().total_cmp(&b.iae()))
-                .then(a.index.cmp(&b.index))
-        });
+        runs.sort_by(|a, b| better(a, b, max_overshoot_percent).then(a.index.cmp(&b.index)));
         runs
+    }
+
+    /// Where the scenario's own gains would rank among the runs (1 = best; after the runs
+    /// they tie with).
+    pub fn baseline_rank(&self, max_overshoot_percent: f64) -> usize {
+        let ahead = self
+            .runs
+            .iter()
+            .filter(|r| better(r, &self.baseline, max_overshoot_percent).is_le())
+            .count();
+        ahead.saturating_add(1)
     }
 }
 
@@ -154,11 +179,17 @@ pub enum SweepError {
     },
     /// The motor runs RC10_LIB's comparison loop, whose gains are fixed.
     LegacyController,
-    /// The motor has no speed or angle target with a step inside the run to measure.
+    /// The motor has no speed or angle step inside the run to measure.
     NoStep,
+    /// The motor's steps mix speeds and angles, whose errors do not add up.
+    MixedSteps,
+    /// The angle loop was asked for, and the motor has no angle target: it never runs.
+    AngleLoopUnused,
+    /// No list of candidates: the sweep would be the scenario's own run.
+    NothingToSweep,
     /// More combinations than [`MAX_RUNS`].
     TooManyRuns {
-        /// How many the lists make.
+        /// How many the lists make (saturated).
         runs: usize,
     },
     /// A candidate is not a valid gain.
@@ -184,9 +215,18 @@ impl fmt::Display for SweepError {
                 "the motor runs RC10_LIB's demo loop, whose gains are fixed: sweep an rc10 motor",
             ),
             SweepError::NoStep => f.write_str(
-                "the motor has no speed or angle target with a step inside the run to measure \
-                 (a chassis wheel's speed comes from the chassis)",
+                "the motor has no speed or angle step inside the run to measure (a chassis \
+                 wheel's speed comes from the chassis)",
             ),
+            SweepError::MixedSteps => f.write_str(
+                "the motor's steps mix speeds and angles: sweep a scenario with one kind",
+            ),
+            SweepError::AngleLoopUnused => f.write_str(
+                "the motor has no angle target, so its angle loop never runs: sweep the speed loop",
+            ),
+            SweepError::NothingToSweep => {
+                f.write_str("no candidate gains: give at least one list (kp, ki or kd)")
+            }
             SweepError::TooManyRuns { runs } => write!(
                 f,
                 "{runs} combinations: at most {MAX_RUNS} (fewer values per gain)"
@@ -203,24 +243,63 @@ impl fmt::Display for SweepError {
 
 impl std::error::Error for SweepError {}
 
+/// Why a list of candidate values was refused.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ValueListError {
+    /// An item is not a number.
+    NotANumber(String),
+    /// A number is infinite or NaN.
+    NotFinite(String),
+    /// A range's count is not a whole number from 2 to [`MAX_RUNS`].
+    BadCount(String),
+    /// An item is neither a number nor `FROM:TO:COUNT`.
+    BadForm(String),
+    /// A value comes twice (its runs would be the same).
+    Repeated(f32),
+    /// More than [`MAX_RUNS`] values.
+    TooMany,
+}
+
+impl fmt::Display for ValueListError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ValueListError::NotANumber(s) => write!(f, "`{s}` is not a number"),
+            ValueListError::NotFinite(s) => write!(f, "`{s}` is not finite"),
+            ValueListError::BadCount(s) => write!(
+                f,
+                "`{s}`: the count must be a whole number from 2 to {MAX_RUNS} (one value: write \
+                 the number)"
+            ),
+            ValueListError::BadForm(s) => {
+                write!(f, "`{s}` is neither a number nor FROM:TO:COUNT")
+            }
+            ValueListError::Repeated(v) => write!(f, "{v} comes twice"),
+            ValueListError::TooMany => write!(f, "more than {MAX_RUNS} values"),
+        }
+    }
+}
+
+impl std::error::Error for ValueListError {}
+
 /// Parses a list of candidate values: comma-separated numbers and `FROM:TO:COUNT` ranges
-/// (`COUNT` evenly spaced values from `FROM` to `TO`, both included), e.g. `0.2:1.0:5,2`
-/// (0.2, 0.4, 0.6, 0.8, 1.0, 2). Values must be finite.
-pub fn parse_values(text: &str) -> Result<Vec<f32>, String> {
-    let mut values = Vec::new();
+/// (`COUNT` ≥ 2 evenly spaced values from `FROM` to `TO`, both included), e.g. `0.2:1.0:5,2`
+/// (0.2, 0.4, 0.6, 0.8, 1.0, 2). Values must be finite and each come once (`0:0:3` and
+/// `1,1` are refused); at most [`MAX_RUNS`] in all.
+pub fn parse_values(text: &str) -> Result<Vec<f32>, ValueListError> {
+    let number = |s: &str| -> Result<f32, ValueListError> {
+        let v: f32 = s
+            .trim()
+            .parse()
+            .map_err(|_| ValueListError::NotANumber(s.trim().to_string()))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(ValueListError::NotFinite(s.trim().to_string()))
+        }
+    };
+    let mut values: Vec<f32> = Vec::new();
     for item in text.split(',') {
         let item = item.trim();
-        let number = |s: &str| -> Result<f32, String> {
-            let v: f32 = s
-                .trim()
-                .parse()
-                .map_err(|_| format!("`{s}` is not a number"))?;
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(format!("`{s}` is not finite"))
-            }
-        };
         let parts: Vec<&str> = item.split(':').collect();
         match parts.as_slice() {
             [v] => values.push(number(v)?),
@@ -230,25 +309,31 @@ pub fn parse_values(text: &str) -> Result<Vec<f32>, String> {
                     .trim()
                     .parse()
                     .ok()
-                    .filter(|n| (1..=MAX_RUNS).contains(n))
-                    .ok_or_else(|| {
-                        format!("`{item}`: the count must be a whole number from 1 to {MAX_RUNS}")
-                    })?;
-                if count == 1 {
-                    values.push(from);
-                } else {
-                    let step = (f64::from(to) - f64::from(from)) / (count - 1) as f64;
-                    values.extend((0..count).map(|i| (f64::from(from) + step * i as f64) as f32));
-                    // The last value is `to` itself, not `from` plus a rounded sum.
-                    if let Some(last) = values.last_mut() {
-                        *last = to;
-                    }
+                    .filter(|n| (2..=MAX_RUNS).contains(n))
+                    .ok_or_else(|| ValueListError::BadCount(item.to_string()))?;
+                if count > MAX_RUNS.saturating_sub(values.len()) {
+                    return Err(ValueListError::TooMany);
+                }
+                let step = (f64::from(to) - f64::from(from)) / (count - 1) as f64;
+                values.extend((0..count).map(|i| (f64::from(from) + step * i as f64) as f32));
+                // The last value is `to` itself, not `from` plus a rounded sum.
+                if let Some(last) = values.last_mut() {
+                    *last = to;
                 }
             }
-            _ => {
-                return Err(format!("`{item}` is neither a number nor FROM:TO:COUNT"));
-            }
+            _ => return Err(ValueListError::BadForm(item.to_string())),
         }
+        if values.len() > MAX_RUNS {
+            return Err(ValueListError::TooMany);
+        }
+    }
+    // Repeats, found in a sorted copy (the list keeps the user's order).
+    let mut sorted = values.clone();
+    sorted.sort_by(f32::total_cmp);
+    if let Some(pair) = sorted.windows(2).find(|pair| pair.first() == pair.get(1)) {
+        return Err(ValueListError::Repeated(
+            pair.first().copied().unwrap_or(0.0),
+        ));
     }
     Ok(values)
 }
@@ -267,18 +352,46 @@ fn base_config(scenario: &Scenario, motor: usize) -> Result<DjiConfig, SweepErro
     }
 }
 
+fn is_angle(kind: TargetKind) -> bool {
+    matches!(kind, TargetKind::AngleDeg | TargetKind::TotalAngleDeg)
+}
+
+/// The motor a sweep tunes when not told: the lowest-numbered rc10 motor with a speed or
+/// angle step before `scenario.duration_ms`, if any.
+pub fn default_motor(scenario: &Scenario) -> Option<usize> {
+    scenario
+        .targets
+        .iter()
+        .filter(|t| {
+            t.kind != TargetKind::Current
+                && t.steps
+                    .iter()
+                    .any(|&(at_ms, _)| at_ms < scenario.duration_ms)
+                && scenario
+                    .motors
+                    .get(t.motor)
+                    .is_some_and(|m| m.controller != Controller::Rc10Legacy)
+        })
+        .map(|t| t.motor)
+        .min()
+}
+
 /// The loop a sweep of `motor` tunes when not told: the angle loop if the motor has an
 /// angle target, else the speed loop.
 pub fn default_loop(scenario: &Scenario, motor: usize) -> Loop {
-    let angle = scenario.targets.iter().any(|t| {
-        t.motor == motor && matches!(t.kind, TargetKind::AngleDeg | TargetKind::TotalAngleDeg)
-    });
+    let angle = scenario
+        .targets
+        .iter()
+        .any(|t| t.motor == motor && is_angle(t.kind));
     if angle { Loop::Angle } else { Loop::Speed }
 }
 
 /// Runs `scenario` once with its own gains and once for every combination of `spec.grid`,
-/// on `jobs` threads (at least one), calling `progress` with the number of runs done after
-/// each. The scenario's other motors and everything else stay as they are.
+/// on up to `jobs` threads (at least one, at most [`MAX_JOBS`] and one per combination),
+/// calling `progress` from those threads, in no set order, with the number of runs done so
+/// far. The scenario's other motors and everything else stay as they are; the tuned loop
+/// keeps its other settings (limits, deadband; the cascade sets the angle loop's error
+/// mode).
 pub fn sweep(
     scenario: &Scenario,
     spec: &SweepSpec,
@@ -286,18 +399,29 @@ pub fn sweep(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SweepOutcome, SweepError> {
     let base = base_config(scenario, spec.motor)?;
-    let measured = scenario
+    let kinds: Vec<TargetKind> = scenario
         .targets
         .iter()
-        .any(|t| t.motor == spec.motor && t.kind != TargetKind::Current && !t.steps.is_empty());
-    if !measured {
+        .filter(|t| t.motor == spec.motor && t.kind != TargetKind::Current && !t.steps.is_empty())
+        .map(|t| t.kind)
+        .collect();
+    if kinds.is_empty() {
         return Err(SweepError::NoStep);
     }
-    let loop_config = |cfg: &DjiConfig| match spec.tuned {
-        Loop::Speed => cfg.cascade.speed,
-        Loop::Angle => cfg.cascade.angle,
+    if kinds.iter().any(|&k| is_angle(k)) && kinds.iter().any(|&k| !is_angle(k)) {
+        return Err(SweepError::MixedSteps);
+    }
+    if spec.tuned == Loop::Angle && !kinds.iter().any(|&k| is_angle(k)) {
+        return Err(SweepError::AngleLoopUnused);
+    }
+    let g = &spec.grid;
+    if g.kp.is_empty() && g.ki.is_empty() && g.kd.is_empty() {
+        return Err(SweepError::NothingToSweep);
+    }
+    let own = match spec.tuned {
+        Loop::Speed => base.cascade.speed,
+        Loop::Angle => base.cascade.angle,
     };
-    let own = loop_config(&base);
     let or_own = |list: &[f32], own: f32| {
         if list.is_empty() {
             vec![own]
@@ -306,15 +430,14 @@ pub fn sweep(
         }
     };
     let (kps, kis, kds) = (
-        or_own(&spec.grid.kp, own.kp),
-        or_own(&spec.grid.ki, own.ki),
-        or_own(&spec.grid.kd, own.kd),
+        or_own(&g.kp, own.kp),
+        or_own(&g.ki, own.ki),
+        or_own(&g.kd, own.kd),
     );
     let count = kps
         .len()
-        .checked_mul(kis.len())
-        .and_then(|n| n.checked_mul(kds.len()))
-        .unwrap_or(usize::MAX);
+        .saturating_mul(kis.len())
+        .saturating_mul(kds.len());
     if count > MAX_RUNS {
         return Err(SweepError::TooManyRuns { runs: count });
     }
@@ -344,57 +467,55 @@ pub fn sweep(
         run(&s).map(|r| SweepRun {
             index,
             gains,
-            steps: r
-                .metrics
-                .iter()
-                .filter(|m| m.motor == spec.motor)
-                .map(|m| (m.kind, m.metrics))
-                .collect(),
+            steps: motor_steps(&s.targets, &r.samples, spec.motor),
         })
     };
-    let baseline = one(
-        0,
-        Gains {
-            kp: own.kp,
-            ki: own.ki,
-            kd: own.kd,
-        },
-        None,
-    )
-    .map_err(SweepError::Run)?;
-    // Every run has the same steps at the same times: none measured here (a step after the
-    // end of the run), none anywhere.
+    let own_gains = Gains {
+        kp: own.kp,
+        ki: own.ki,
+        kd: own.kd,
+    };
+    let baseline = one(0, own_gains, None).map_err(SweepError::Run)?;
+    // Every run has the same steps at the same times: none measured here (every step after
+    // the end of the run), none anywhere.
     if baseline.steps.is_empty() {
         return Err(SweepError::NoStep);
     }
 
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let work = || {
+        let mut mine = Vec::new();
+        while !failed.load(Ordering::Relaxed) {
+            let index = next.fetch_add(1, Ordering::Relaxed);
+            let Some(&(gains, cfg)) = grid.get(index) else {
+                break;
+            };
+            let result = one(index, gains, Some(cfg));
+            if result.is_err() {
+                // The sweep fails with it: the other threads stop taking runs.
+                failed.store(true, Ordering::Relaxed);
+            }
+            mine.push((index, result));
+            progress(done.fetch_add(1, Ordering::Relaxed).saturating_add(1));
+        }
+        mine
+    };
     let mut results: Vec<(usize, Result<SweepRun, SimError>)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..jobs.clamp(1, count.max(1)))
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut mine = Vec::new();
-                    loop {
-                        let index = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(&(gains, cfg)) = grid.get(index) else {
-                            break;
-                        };
-                        mine.push((index, one(index, gains, Some(cfg))));
-                        progress(done.fetch_add(1, Ordering::Relaxed).saturating_add(1));
-                    }
-                    mine
-                })
-            })
+        // Threads the system refuses are done without: this thread works too.
+        let helpers: Vec<_> = (1..jobs.clamp(1, count.clamp(1, MAX_JOBS)))
+            .filter_map(|_| std::thread::Builder::new().spawn_scoped(scope, work).ok())
             .collect();
-        workers
-            .into_iter()
-            .flat_map(|w| match w.join() {
-                Ok(mine) => mine,
+        let mut all = work();
+        for helper in helpers {
+            match helper.join() {
+                Ok(mine) => all.extend(mine),
                 // A run that panicked takes the sweep down with it, as it would alone.
                 Err(panic) => std::panic::resume_unwind(panic),
-            })
-            .collect()
+            }
+        }
+        all
     });
     results.sort_by_key(|(index, _)| *index);
     let runs = results
@@ -418,21 +539,20 @@ struct Row {
 
 impl Row {
     fn of(run: &SweepRun) -> Row {
-        let worst = |f: fn(&StepMetrics) -> Option<f64>| {
+        let worst = |f: fn(&MeasuredStep) -> Option<f64>| {
             run.steps
                 .iter()
-                .map(|(_, m)| f(m))
+                .map(f)
                 .try_fold(0.0f64, |acc, v| v.map(|v| acc.max(v)))
         };
-        let largest =
-            |f: fn(&StepMetrics) -> f64| run.steps.iter().map(|(_, m)| f(m)).fold(0.0f64, f64::max);
+        let largest = |f: fn(&MeasuredStep) -> f64| run.steps.iter().map(f).fold(0.0f64, f64::max);
         Row {
-            rise_s: worst(|m| m.rise_time_s),
-            overshoot_percent: largest(|m| m.overshoot_percent),
-            settling_s: worst(|m| m.settling_time_s),
-            steady_error: largest(|m| m.steady_state_error),
+            rise_s: worst(|s| s.metrics.rise_time_s),
+            overshoot_percent: largest(|s| s.metrics.overshoot_percent),
+            settling_s: worst(|s| s.metrics.settling_time_s),
+            steady_error: largest(|s| s.metrics.steady_state_error),
             iae: run.iae(),
-            peak_amps: largest(|m| m.peak_current_amps),
+            peak_amps: largest(|s| s.metrics.peak_current_amps),
         }
     }
 }
@@ -458,31 +578,31 @@ fn ms(v: Option<f64>) -> String {
     v.map_or_else(|| "never".to_string(), |s| format!("{:.1} ms", s * 1e3))
 }
 
-/// The unit of the steps' error (rpm or deg), from the first step.
+/// The unit of the steps' error (rpm or deg).
 fn error_unit(outcome: &SweepOutcome) -> &'static str {
-    match outcome.baseline.steps.first().map(|(k, _)| *k) {
-        Some(TargetKind::Rpm) | None => "rpm",
-        Some(TargetKind::Current) => "A",
+    match outcome.baseline.steps.first().map(|s| s.kind) {
         Some(TargetKind::AngleDeg | TargetKind::TotalAngleDeg) => "deg",
+        Some(TargetKind::Current) => "A",
+        Some(TargetKind::Rpm) | None => "rpm",
     }
 }
 
-/// The scenario's own gains, then the best `top` runs, as a table; figures are the worst of
-/// the motor's steps, IAE their sum.
+/// The scenario's own gains (with the rank they would have), then the best `top` runs, as a
+/// table; figures are the worst of the motor's steps, IAE their sum.
 pub fn table(outcome: &SweepOutcome, max_overshoot_percent: f64, top: usize) -> String {
     use fmt::Write as _;
     let u = error_unit(outcome);
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10} {:>14} {:>13} {:>9}  qualifies",
+        "{:<9} {:>11} {:>11} {:>11} {:>10} {:>10} {:>10} {:>14} {:>15} {:>9}  qualifies",
         "rank", "kp", "ki", "kd", "rise", "overshoot", "settle 2%", "steady err", "IAE", "peak I",
     );
     let mut line = |rank: String, run: &SweepRun| {
         let r = Row::of(run);
         let _ = writeln!(
             s,
-            "{rank:<9} {:>9} {:>9} {:>9} {:>10} {:>9.2}% {:>10} {:>10.3} {u:<3} {:>13} {:>7.2} A  {}",
+            "{rank:<9} {:>11} {:>11} {:>11} {:>10} {:>9.2}% {:>10} {:>10.3} {u:<3} {:>15} {:>7.2} A  {}",
             gain(run.gains.kp),
             gain(run.gains.ki),
             gain(run.gains.kd),
@@ -499,7 +619,8 @@ pub fn table(outcome: &SweepOutcome, max_overshoot_percent: f64, top: usize) -> 
             }
         );
     };
-    line("scenario".to_string(), &outcome.baseline);
+    let baseline_rank = outcome.baseline_rank(max_overshoot_percent);
+    line(format!("({baseline_rank})"), &outcome.baseline);
     for (i, run) in outcome
         .ranked(max_overshoot_percent)
         .into_iter()
@@ -511,8 +632,9 @@ pub fn table(outcome: &SweepOutcome, max_overshoot_percent: f64, top: usize) -> 
     s
 }
 
-/// Writes every run, in grid order, as CSV: the gains, whether it qualifies, the IAE sum,
-/// then each step's figures (rise and settling in ms, empty when never reached).
+/// Writes the scenario's own run (index `scenario`) and every run in grid order as CSV: the
+/// gains, whether it qualifies, the IAE sum, then each step's figures (rise and settling in
+/// ms, empty when never reached).
 pub fn write_csv(
     outcome: &SweepOutcome,
     max_overshoot_percent: f64,
@@ -525,27 +647,30 @@ pub fn write_csv(
     for i in 1..=outcome.baseline.steps.len() {
         write!(
             out,
-            ",step{i}_rise_ms,step{i}_overshoot_percent,step{i}_settling_ms,\
+            ",step{i}_at_ms,step{i}_rise_ms,step{i}_overshoot_percent,step{i}_settling_ms,\
              step{i}_steady_error_{u},step{i}_peak_amps"
         )?;
     }
     writeln!(out)?;
     let opt = |v: Option<f64>| v.map_or_else(String::new, |s| format!("{:.3}", s * 1e3));
-    for run in &outcome.runs {
+    let baseline = std::iter::once(("scenario".to_string(), &outcome.baseline));
+    let grid = outcome.runs.iter().map(|r| (r.index.to_string(), r));
+    for (index, run) in baseline.chain(grid) {
         write!(
             out,
-            "{},{},{},{},{},{}",
-            run.index,
+            "{index},{},{},{},{},{}",
             run.gains.kp,
             run.gains.ki,
             run.gains.kd,
             u8::from(run.qualifies(max_overshoot_percent)),
             run.iae()
         )?;
-        for (_, m) in &run.steps {
+        for step in &run.steps {
+            let m = &step.metrics;
             write!(
                 out,
-                ",{},{},{},{},{}",
+                ",{},{},{},{},{},{}",
+                step.at_ms,
                 opt(m.rise_time_s),
                 m.overshoot_percent,
                 opt(m.settling_time_s),
@@ -561,9 +686,9 @@ pub fn write_csv(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::min_speed_rise_time_s;
+    use crate::metrics::{StepMetrics, min_speed_rise_time_s};
     use crate::plant::MotorParams;
-    use crate::scenario::builtin_named;
+    use crate::scenario::{TargetSpec, builtin_named};
 
     fn scenario(name: &str) -> Scenario {
         builtin_named(name).unwrap_or_else(|| panic!("no scenario {name}"))
@@ -575,6 +700,13 @@ mod tests {
             tuned: Loop::Speed,
             grid,
             max_overshoot_percent: 5.0,
+        }
+    }
+
+    fn kp_only(kp: Vec<f32>) -> GainGrid {
+        GainGrid {
+            kp,
+            ..GainGrid::default()
         }
     }
 
@@ -597,6 +729,7 @@ mod tests {
     fn value_lists_take_numbers_and_inclusive_ranges() {
         assert_eq!(parse_values("0.5").unwrap(), vec![0.5]);
         assert_eq!(parse_values("1, 2,3").unwrap(), vec![1.0, 2.0, 3.0]);
+        assert_eq!(parse_values("1e3,-2").unwrap(), vec![1000.0, -2.0]);
         assert_eq!(
             parse_values("0:1:5,7").unwrap(),
             vec![0.0, 0.25, 0.5, 0.75, 1.0, 7.0]
@@ -604,12 +737,30 @@ mod tests {
         // Both ends exactly, however the step rounds.
         let v = parse_values("0.1:0.7:7").unwrap();
         assert_eq!((v.len(), v[0], v[6]), (7, 0.1, 0.7));
-        assert_eq!(parse_values("3:9:1").unwrap(), vec![3.0]);
+        assert_eq!(
+            parse_values(" -2 : -1 : 3 ").unwrap(),
+            vec![-2.0, -1.5, -1.0]
+        );
         assert_eq!(parse_values("2:1:3").unwrap(), vec![2.0, 1.5, 1.0]);
-        for bad in [
-            "", "x", "1:2", "1:2:0", "1:2:x", "1:2:3:4", "nan", "inf", "1,,2",
+        use ValueListError as E;
+        for (bad, error) in [
+            ("", E::NotANumber(String::new())),
+            ("x", E::NotANumber("x".into())),
+            ("1,,2", E::NotANumber(String::new())),
+            ("nan", E::NotFinite("nan".into())),
+            ("inf", E::NotFinite("inf".into())),
+            ("1:2", E::BadForm("1:2".into())),
+            ("1:2:3:4", E::BadForm("1:2:3:4".into())),
+            ("1:2:x", E::BadCount("1:2:x".into())),
+            ("1:2:0", E::BadCount("1:2:0".into())),
+            // One value is written as the number; a range of one would drop its end.
+            ("3:9:1", E::BadCount("3:9:1".into())),
+            ("1,1", E::Repeated(1.0)),
+            ("0:0:3", E::Repeated(0.0)),
+            ("0:1:3,0.5", E::Repeated(0.5)),
+            ("0:1:60000,2:3:60000", E::TooMany),
         ] {
-            assert!(parse_values(bad).is_err(), "{bad:?}");
+            assert_eq!(parse_values(bad), Err(error), "{bad:?}");
         }
     }
 
@@ -642,7 +793,38 @@ mod tests {
         // same gains gives the same figures (the same simulation).
         assert_eq!((out.baseline.gains.kp, out.baseline.gains.ki), (0.6, 8.0));
         assert_eq!(out.runs[4].steps, out.baseline.steps);
-        assert_eq!(out.baseline.steps.len(), 1);
+        // The profile holds 0 rpm from 0 ms (no step: the motor is there) and steps to 300 at
+        // 10 ms: one step, measured as the run's own table measures it.
+        let steps = &out.baseline.steps;
+        assert_eq!(steps.len(), 1);
+        assert_eq!((steps[0].at_ms, steps[0].window_ms), (10, 390));
+        let table = run(&scenario("m3508-speed-step")).unwrap().metrics;
+        assert_eq!(steps[0].metrics, table[0].metrics);
+    }
+
+    #[test]
+    fn every_step_of_a_profile_is_measured_until_the_next() {
+        let mut s = scenario("m3508-speed-step");
+        s.targets[0].steps = vec![(0, 0.0), (10, 300.0), (10, 300.0), (200, -100.0)];
+        let out = sweep(&s, &speed_spec(kp_only(vec![0.6])), 1, &|_| {}).unwrap();
+        let steps = &out.baseline.steps;
+        // The repeated 300 is no step.
+        assert_eq!(steps.len(), 2, "{steps:?}");
+        assert_eq!((steps[0].at_ms, steps[0].window_ms), (10, 190));
+        assert_eq!((steps[1].at_ms, steps[1].window_ms), (200, 200));
+        // The first settled 49 ms after its step (the shipped gains), so the second starts
+        // from within 2 % of 300 rpm.
+        let second = steps[1].metrics;
+        assert!((second.initial - 300.0).abs() < 6.0, "{second:?}");
+        assert_eq!(second.target, -100.0);
+        // Its settling counts from its own step, within its own window.
+        assert!(
+            second.settling_time_s.is_some_and(|t| t < 0.18),
+            "{second:?}"
+        );
+        // The last step is the profile's last: the run's own table has the same figures.
+        let table = run(&s).unwrap().metrics;
+        assert_eq!(second, table[0].metrics);
     }
 
     #[test]
@@ -655,16 +837,17 @@ mod tests {
         let s = scenario("m2006-speed-step");
         let one = sweep(&s, &spec, 1, &|_| {}).unwrap();
         let two = sweep(&s, &spec, 2, &|_| {}).unwrap();
-        let many = sweep(&s, &spec, 64, &|_| {}).unwrap();
+        let many = sweep(&s, &spec, usize::MAX, &|_| {}).unwrap();
         assert_eq!(one, two);
         assert_eq!(one, many);
     }
 
     #[test]
-    fn a_loop_too_weak_to_use_the_current_ranks_below_the_shipped_gains() {
+    fn a_loop_too_weak_to_use_the_current_ranks_last() {
         // kp 0.01 A/rpm asks for 3 A at the 300 rpm step, a sixth of the 20 A the C620 can
         // give: the rise takes several times the full-current minimum, and the integral
-        // (ki 0.1 A per rpm·s) cannot make that up within the 400 ms run.
+        // (ki 0.1 A per rpm·s) cannot make that up within the 400 ms run. kp 0.6 asks for
+        // 180 A: full current, the fastest rise there is.
         let spec = speed_spec(GainGrid {
             kp: vec![0.01, 0.6],
             ki: vec![0.1, 8.0],
@@ -673,8 +856,7 @@ mod tests {
         let s = scenario("m3508-speed-step");
         let out = sweep(&s, &spec, 2, &|_| {}).unwrap();
         let ranked = out.ranked(5.0);
-        let best = ranked[0];
-        assert_eq!((best.gains.kp, best.gains.ki), (0.6, 8.0));
+        assert_eq!(ranked[0].gains.kp, 0.6);
         let weakest = &out.runs[0];
         assert_eq!((weakest.gains.kp, weakest.gains.ki), (0.01, 0.1));
         assert!(!weakest.qualifies(5.0));
@@ -685,13 +867,17 @@ mod tests {
             300.0,
         )
         .unwrap();
-        let (_, m) = weakest.steps[0];
+        let m = weakest.steps[0].metrics;
         assert!(m.rise_time_s.is_none_or(|r| r > 3.0 * min), "{m:?}");
-        // Ranked by IAE among the qualified: the weak run's error lasts the whole window.
-        assert!(weakest.iae() > 2.0 * best.iae());
+        assert!(weakest.iae() > 2.0 * ranked[0].iae());
     }
 
-    fn synthetic(index: usize, overshoot_percent: f64, settles: bool, iae: f64) -> SweepRun {
+    fn synthetic(
+        index: usize,
+        overshoot_percent: f64,
+        settling_s: Option<f64>,
+        iae: f64,
+    ) -> SweepRun {
         SweepRun {
             index,
             gains: Gains {
@@ -699,70 +885,77 @@ mod tests {
                 ki: 0.0,
                 kd: 0.0,
             },
-            steps: vec![(
-                TargetKind::Rpm,
-                StepMetrics {
+            steps: vec![MeasuredStep {
+                kind: TargetKind::Rpm,
+                at_ms: 10,
+                window_ms: 400,
+                metrics: StepMetrics {
                     initial: 0.0,
                     target: 100.0,
                     rise_time_s: Some(0.01),
                     overshoot_percent,
-                    settling_time_s: settles.then_some(0.05),
+                    settling_time_s: settling_s,
                     steady_state_error: 0.0,
                     iae,
                     peak_current_amps: 1.0,
                 },
-            )],
+            }],
         }
     }
 
     #[test]
     fn qualifying_runs_rank_first_each_group_by_error_then_grid_order() {
+        let settled = Some(0.05);
         let runs = vec![
-            synthetic(0, 9.0, true, 1.0), // overshoots: out, however small its error
-            synthetic(1, 1.0, true, 3.0), // in
-            synthetic(2, 0.0, false, 0.5), // never settles: out
-            synthetic(3, 5.0, true, 2.0), // in: at the limit counts
-            synthetic(4, 2.0, true, 2.0), // in, the same error as 3: after it
-            synthetic(5, 9.0, true, 4.0), // out
+            synthetic(0, 9.0, settled, 1.0), // overshoots: out, however small its error
+            synthetic(1, 1.0, settled, 3.0), // in
+            synthetic(2, 0.0, None, 0.5),    // never settles: out
+            synthetic(3, 5.0, settled, 2.0), // in: at the limit counts
+            synthetic(4, 2.0, settled, 2.0), // in, the same error as 3: after it
+            synthetic(5, 9.0, settled, 4.0), // out
+            // Settled only in the last tenth of its 400 ms window (after 360 ms): out.
+            synthetic(6, 0.0, Some(0.37), 0.1),
+            synthetic(7, 0.0, Some(0.36), 5.0), // just in time: in
         ];
         let outcome = SweepOutcome {
-            baseline: synthetic(0, 0.0, true, 1.0),
+            baseline: synthetic(0, 0.0, settled, 2.0),
             runs,
         };
         let order: Vec<usize> = outcome.ranked(5.0).iter().map(|r| r.index).collect();
-        assert_eq!(order, [3, 4, 1, 2, 0, 5]);
+        assert_eq!(order, [3, 4, 1, 7, 6, 2, 0, 5]);
+        // The baseline's 2.0 ties runs 3 and 4 and ranks after them.
+        assert_eq!(outcome.baseline_rank(5.0), 3);
         // With no limit to speak of, only settling counts.
         let order: Vec<usize> = outcome.ranked(100.0).iter().map(|r| r.index).collect();
-        assert_eq!(order, [0, 3, 4, 1, 5, 2]);
+        assert_eq!(order, [0, 3, 4, 1, 5, 7, 6, 2]);
         // Nothing measured qualifies for nothing.
         let unmeasured = SweepRun {
             steps: Vec::new(),
-            ..synthetic(6, 0.0, true, 0.0)
+            ..synthetic(8, 0.0, settled, 0.0)
         };
         assert!(!unmeasured.qualifies(100.0));
     }
 
     #[test]
-    fn a_stiffer_integral_overshoots_more_and_drops_out_under_a_tight_limit() {
-        // PI on the motor's first-order speed response: raising ki against the same kp lowers
-        // the closed loop's damping, so the speed swings further past the step once the
-        // current leaves its limit.
+    fn a_stiffer_integral_overshoots_and_drops_out_under_a_tight_limit() {
+        // Past the current limit the speed loop is PI on J·dω/dt = kt·i: damping
+        // ζ = kt·kp / (2·√(J·kt·ki)), with kp and ki in A per rad/s. For the M3508 at the
+        // output (J ≈ 6.5e-3 kg·m², kt ≈ 0.25 N·m/A), kp 0.6 A/rpm = 5.7 A/(rad/s): ki 8
+        // A/(rpm·s) gives ζ ≈ 2 (overdamped: the documented 0.5 % of the shipped gains),
+        // ki 120 gives ζ ≈ 0.5 (underdamped: it swings past).
         let spec = speed_spec(GainGrid {
             kp: vec![0.6],
             ki: vec![8.0, 120.0],
             kd: vec![],
         });
         let out = sweep(&scenario("m3508-speed-step"), &spec, 1, &|_| {}).unwrap();
-        let (_, soft) = out.runs[0].steps[0];
-        let (_, stiff) = out.runs[1].steps[0];
-        assert!(
-            stiff.overshoot_percent > 1.0 && stiff.overshoot_percent > 2.0 * soft.overshoot_percent,
-            "{soft:?} {stiff:?}"
-        );
-        let limit = (soft.overshoot_percent + stiff.overshoot_percent) / 2.0;
-        assert!(out.runs[0].qualifies(limit));
-        assert!(!out.runs[1].qualifies(limit));
-        assert_eq!(out.ranked(limit)[0].index, 0);
+        let soft = out.runs[0].steps[0].metrics;
+        let stiff = out.runs[1].steps[0].metrics;
+        assert!(soft.overshoot_percent < 1.0, "{soft:?}");
+        assert!(stiff.overshoot_percent > 2.0, "{stiff:?}");
+        assert!(out.runs[0].qualifies(1.0));
+        assert!(!out.runs[1].qualifies(1.0));
+        assert_eq!(out.ranked(1.0)[0].index, 0);
     }
 
     #[test]
@@ -772,33 +965,59 @@ mod tests {
         let spec = SweepSpec {
             motor: 0,
             tuned: Loop::Angle,
-            grid: GainGrid {
-                kp: vec![1.0, 8.0],
-                ..GainGrid::default()
-            },
+            grid: kp_only(vec![1.0, 8.0]),
             max_overshoot_percent: 5.0,
         };
         let out = sweep(&s, &spec, 2, &|_| {}).unwrap();
         // The shipped angle loop is kp 8 rpm/deg: the grid's second run is the baseline.
         assert_eq!(out.runs[1].steps, out.baseline.steps);
-        // 1 rpm per degree of error (6°/s per degree) closes the 10° step with a time constant
-        // of 1/6 s; 8 rpm per degree in 21 ms, less the time to accelerate.
-        let (kind, slow) = out.runs[0].steps[0];
-        let (_, fast) = out.runs[1].steps[0];
-        assert_eq!(kind, TargetKind::AngleDeg);
-        assert!(slow.iae > 3.0 * fast.iae, "{slow:?} {fast:?}");
+        let slow = out.runs[0].steps[0];
+        let fast = out.runs[1].steps[0];
+        assert_eq!(fast.kind, TargetKind::AngleDeg);
+        // 0° to 350° is 10° backwards, the short way.
+        let m = fast.metrics;
+        assert!((m.target - m.initial + 10.0).abs() < 1e-6, "{m:?}");
+        assert!(out.runs[1].qualifies(5.0), "{m:?}");
+        // 1 rpm per degree of error (6°/s per degree) closes the step with a time constant of
+        // 1/6 s; 8 rpm per degree in 21 ms, plus the time to accelerate.
+        assert!(slow.metrics.iae > 3.0 * m.iae, "{slow:?} {fast:?}");
+    }
+
+    #[test]
+    fn the_tuned_loop_keeps_the_limits_it_was_given() {
+        // A scenario file's speed loop limited to 5 A: every candidate asks for far more at
+        // the 300 rpm step (kp·300 ≥ 180 A) and gets 5 A.
+        let mut s = scenario("m3508-speed-step");
+        let mut cfg = DjiConfig::default_for(s.motors[0].model);
+        cfg.cascade.speed.output_limit = 5.0;
+        s.motors[0].controller = Controller::Rc10With(cfg);
+        let out = sweep(&s, &speed_spec(kp_only(vec![0.6, 1.2])), 2, &|_| {}).unwrap();
+        for run in out.runs.iter().chain([&out.baseline]) {
+            let peak = run.steps[0].metrics.peak_current_amps;
+            assert!(peak > 4.9 && peak <= 5.0 + 1e-9, "{run:?}");
+        }
+    }
+
+    #[test]
+    fn the_default_motor_is_the_first_rc10_motor_with_a_step() {
+        assert_eq!(default_motor(&scenario("m3508-speed-step")), Some(0));
+        assert_eq!(default_motor(&scenario("m3508-speed-step-rc10lib")), None);
+        let mut s = scenario("fault-power-cut");
+        assert_eq!(default_motor(&s), Some(0));
+        s.motors[0].controller = Controller::Rc10Legacy;
+        assert_eq!(default_motor(&s), Some(1));
+        for t in &mut s.targets {
+            t.steps = vec![(s.duration_ms, 100.0)];
+        }
+        assert_eq!(default_motor(&s), None);
     }
 
     #[test]
     fn refused_sweeps_say_why() {
         let s = scenario("m3508-speed-step");
-        let grid = GainGrid {
-            kp: vec![0.5],
-            ..GainGrid::default()
-        };
         let with_motor = |motor| SweepSpec {
             motor,
-            ..speed_spec(grid.clone())
+            ..speed_spec(kp_only(vec![0.5]))
         };
         assert_eq!(
             sweep(&s, &with_motor(1), 1, &|_| {}),
@@ -807,22 +1026,14 @@ mod tests {
                 motors: 1
             })
         );
+        let legacy = scenario("m3508-speed-step-rc10lib");
         assert_eq!(
-            sweep(
-                &scenario("m3508-speed-step-rc10lib"),
-                &with_motor(0),
-                1,
-                &|_| {}
-            ),
+            sweep(&legacy, &with_motor(0), 1, &|_| {}),
             Err(SweepError::LegacyController)
         );
+        let chassis = scenario("chassis-remote-drive");
         assert_eq!(
-            sweep(
-                &scenario("chassis-remote-drive"),
-                &with_motor(0),
-                1,
-                &|_| {}
-            ),
+            sweep(&chassis, &with_motor(0), 1, &|_| {}),
             Err(SweepError::NoStep)
         );
         // A step after the end of the run: nothing to rank by.
@@ -832,11 +1043,30 @@ mod tests {
             sweep(&late, &with_motor(0), 1, &|_| {}),
             Err(SweepError::NoStep)
         );
-        // Through the library (the command line's lists refuse it): a gain that is not finite.
-        let infinite = speed_spec(GainGrid {
-            kp: vec![0.5, f32::INFINITY],
-            ..GainGrid::default()
+        let mut mixed = s.clone();
+        mixed.targets.push(TargetSpec {
+            motor: 0,
+            kind: TargetKind::AngleDeg,
+            steps: vec![(200, 90.0)],
         });
+        assert_eq!(
+            sweep(&mixed, &with_motor(0), 1, &|_| {}),
+            Err(SweepError::MixedSteps)
+        );
+        let angle_of_speed = SweepSpec {
+            tuned: Loop::Angle,
+            ..with_motor(0)
+        };
+        assert_eq!(
+            sweep(&s, &angle_of_speed, 1, &|_| {}),
+            Err(SweepError::AngleLoopUnused)
+        );
+        assert_eq!(
+            sweep(&s, &speed_spec(GainGrid::default()), 1, &|_| {}),
+            Err(SweepError::NothingToSweep)
+        );
+        // Through the library (the command line's lists refuse it): a gain that is not finite.
+        let infinite = speed_spec(kp_only(vec![0.5, f32::INFINITY]));
         assert!(matches!(
             sweep(&s, &infinite, 1, &|_| {}),
             Err(SweepError::InvalidGains { gains, error: PidConfigError::GainNotFinite })
@@ -857,10 +1087,7 @@ mod tests {
     fn progress_counts_every_run() {
         let calls = AtomicUsize::new(0);
         let highest = AtomicUsize::new(0);
-        let spec = speed_spec(GainGrid {
-            kp: vec![0.4, 0.5, 0.6],
-            ..GainGrid::default()
-        });
+        let spec = speed_spec(kp_only(vec![0.4, 0.5, 0.6]));
         sweep(&scenario("m3508-speed-step"), &spec, 2, &|n| {
             calls.fetch_add(1, Ordering::Relaxed);
             highest.fetch_max(n, Ordering::Relaxed);
@@ -868,5 +1095,30 @@ mod tests {
         .unwrap();
         assert_eq!(calls.load(Ordering::Relaxed), 3);
         assert_eq!(highest.load(Ordering::Relaxed), 3);
+    }
+
+    #[test]
+    fn the_csv_holds_the_scenario_and_every_run_with_every_step() {
+        let mut s = scenario("m3508-speed-step");
+        s.targets[0].steps = vec![(10, 300.0), (200, 0.0)];
+        let out = sweep(&s, &speed_spec(kp_only(vec![0.3, 0.6])), 1, &|_| {}).unwrap();
+        let path = std::env::temp_dir().join(format!("rc10-sweep-{}.csv", std::process::id()));
+        write_csv(&out, 5.0, &path).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 4, "{text}");
+        let header: Vec<&str> = lines[0].split(',').collect();
+        assert_eq!(header.len(), 6 + 2 * 6);
+        assert_eq!(header[5], "iae_rpm_s");
+        assert_eq!(header[6], "step1_at_ms");
+        assert_eq!(header[12], "step2_at_ms");
+        for (line, index) in lines[1..].iter().zip(["scenario", "0", "1"]) {
+            let fields: Vec<&str> = line.split(',').collect();
+            assert_eq!(fields.len(), header.len(), "{line}");
+            assert_eq!(fields[0], index);
+            assert_eq!((fields[6], fields[12]), ("10", "200"));
+        }
+        assert!(lines[2].starts_with("0,0.3,8,0,"), "{text}");
     }
 }

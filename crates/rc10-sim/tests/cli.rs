@@ -49,7 +49,8 @@ fn sweep_prints_the_ranking_and_writes_every_run() {
         .take_while(|l| !l.is_empty())
         .collect();
     assert_eq!(rows.len(), 5, "{stdout}");
-    assert!(rows[0].starts_with("scenario"), "{stdout}");
+    // The scenario's own kp 0.6, ki 8 ties the grid's run of them and would rank after it.
+    assert!(rows[0].starts_with("(2)"), "{stdout}");
     let gains = |row: &str| -> Vec<String> {
         row.split_whitespace()
             .skip(1)
@@ -62,11 +63,12 @@ fn sweep_prints_the_ranking_and_writes_every_run() {
     assert!(rows[4].trim_end().ends_with("no"), "{stdout}");
     let csv = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines.len(), 5, "{csv}");
-    assert!(lines[0].starts_with("index,kp,ki,kd,qualifies,iae_rpm_s,step1_rise_ms"));
+    assert_eq!(lines.len(), 6, "{csv}");
+    assert!(lines[0].starts_with("index,kp,ki,kd,qualifies,iae_rpm_s,step1_at_ms,step1_rise_ms"));
+    assert!(lines[1].starts_with("scenario,0.6,8,0,1,"), "{csv}");
     // Grid order: kp slowest.
-    assert!(lines[1].starts_with("0,0.01,0.1,0,0,"), "{csv}");
-    assert!(lines[4].starts_with("3,0.6,8,0,1,"), "{csv}");
+    assert!(lines[2].starts_with("0,0.01,0.1,0,0,"), "{csv}");
+    assert!(lines[5].starts_with("3,0.6,8,0,1,"), "{csv}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -75,8 +77,17 @@ fn sweep_refuses_bad_arguments_with_a_reason() {
     for (args, reason) in [
         (&["sweep", "--kp", "1:2"][..], "--kp: `1:2` is neither"),
         (&["sweep", "--motor", "0"][..], "--motor counts from 1"),
-        (&["sweep", "--motor", "2"][..], "no motor 2"),
-        (&["sweep", "--jobs", "0"][..], "--jobs must be 1 or more"),
+        (&["sweep", "--motor", "2", "--kp", "1"][..], "no motor 2"),
+        (
+            &["sweep", "--jobs", "0", "--kp", "1"][..],
+            "--jobs must be 1 or more",
+        ),
+        (&["sweep"][..], "no candidate gains"),
+        (&["sweep", "--kp", "1,1"][..], "--kp: 1 comes twice"),
+        (
+            &["sweep", "--loop", "angle", "--kp", "1"][..],
+            "no angle target",
+        ),
         (&["sweep", "--max-overshoot=-1"][..], "--max-overshoot"),
         (
             &["sweep", "m3508-speed-step-rc10lib", "--kp", "1"][..],

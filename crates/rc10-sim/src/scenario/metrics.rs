@@ -111,6 +111,92 @@ pub(super) fn target_metrics(targets: &[TargetSpec], samples: &[Sample]) -> Vec<
         .collect()
 }
 
+/// One step of a motor's target profiles, measured over its window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuredStep {
+    /// What was stepped.
+    pub kind: TargetKind,
+    /// When, ms.
+    pub at_ms: u64,
+    /// How long the response was measured, ms: until the motor's next step (of any of its
+    /// target profiles) or the end of the run.
+    pub window_ms: u64,
+    /// The figures over that window.
+    pub metrics: StepMetrics,
+}
+
+/// Every speed and angle step of `motor`'s target profiles, in time order (profiles in
+/// target order on the same ms), each measured on the physical signal from its step until the
+/// motor's next step of any profile (current ones too) or the end of `samples`.
+///
+/// Not steps, and not measured: an entry that repeats the motor's previous one (same kind,
+/// same value), one that asks for where the motor already is (a profile's "hold 0 rpm" at
+/// 0 ms), one with no sample in its window (replaced on the same ms, or after the end). The
+/// motor's last step is measured as [`target_metrics`] measures its profile's last step, to
+/// the bit.
+pub(crate) fn motor_steps(
+    targets: &[TargetSpec],
+    samples: &[Sample],
+    motor: usize,
+) -> Vec<MeasuredStep> {
+    let mut entries: Vec<(u64, TargetKind, f32)> = targets
+        .iter()
+        .filter(|t| t.motor == motor)
+        .flat_map(|t| t.steps.iter().map(|&(at_ms, value)| (at_ms, t.kind, value)))
+        .collect();
+    entries.sort_by_key(|&(at_ms, _, _)| at_ms);
+    let mut changes: Vec<(u64, TargetKind, f32)> = Vec::with_capacity(entries.len());
+    for e in entries {
+        if changes
+            .last()
+            .is_some_and(|&(_, kind, value)| kind == e.1 && value == e.2)
+        {
+            continue;
+        }
+        changes.push(e);
+    }
+    let end_ms = samples.last().map_or(0, |s| s.t_ms.saturating_add(1));
+    let signal = |kind: TargetKind, s: &MotorSample| match kind {
+        TargetKind::Rpm => s.true_rpm,
+        _ => s.true_total_deg,
+    };
+    changes
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, kind, _))| *kind != TargetKind::Current)
+        .filter_map(|(i, &(at_ms, kind, value))| {
+            let until_ms = changes
+                .get(i.saturating_add(1))
+                .map_or(end_ms, |&(t, _, _)| t);
+            let first = samples.partition_point(|s| s.t_ms < at_ms);
+            let last = samples.partition_point(|s| s.t_ms < until_ms);
+            let window = samples.get(first..last)?;
+            let y0 = signal(kind, window.first()?.motors.get(motor)?);
+            let target = match kind {
+                // The shortest way from where the motor was.
+                TargetKind::AngleDeg => y0 + f64::from(wrap_deg_180(value - y0 as f32)),
+                _ => f64::from(value),
+            };
+            if (target - y0).abs() < 1e-9 {
+                return None;
+            }
+            let series: Vec<(f64, f64, f64)> = window
+                .iter()
+                .filter_map(|s| {
+                    let m = s.motors.get(motor)?;
+                    Some((s.t_ms as f64 * 1e-3, signal(kind, m), m.current_amps))
+                })
+                .collect();
+            Some(MeasuredStep {
+                kind,
+                at_ms,
+                window_ms: until_ms.saturating_sub(at_ms),
+                metrics: step_metrics_of(&series, at_ms as f64 * 1e-3, y0, target),
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
