@@ -237,7 +237,9 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
         grid,
         max_overshoot_percent: args.max_overshoot,
     };
-    // Before the runs: a long sweep should not end in a folder that cannot be made.
+    // What the sweep would refuse, before anything is written; then the output folder,
+    // before the runs: a long sweep should not end in a folder that cannot be made.
+    sweep::check(&scenario, &spec).map_err(|e| format!("sweep of `{}`: {e}", scenario.name))?;
     std::fs::create_dir_all(&args.out)
         .map_err(|e| format!("creating {}: {e}", args.out.display()))?;
     say(&format!(
@@ -252,12 +254,14 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     // On a terminal only (a pipe or a log gets the table alone), and only ever forwards: the
     // threads report in no set order.
     let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let shown = std::sync::atomic::AtomicUsize::new(0);
+    let shown = std::sync::Mutex::new(0usize);
     let progress = |done: usize| {
         if terminal
             && runs >= 20
-            && shown.fetch_max(done, std::sync::atomic::Ordering::Relaxed) < done
+            && let Ok(mut shown) = shown.lock()
+            && *shown < done
         {
+            *shown = done;
             eprint!("\r  {done} / {runs}");
         }
     };

@@ -4,11 +4,12 @@
 //!
 //! Every run is the whole simulation (bus, plants, rc10's real drivers), deterministic: the
 //! same scenario and gains give the same figures whatever the number of threads. Each speed
-//! or angle step of the motor's target profiles is measured on the physical signal until the
-//! motor's next step (or the end of the run). A run *qualifies* when every step settles
-//! within ±2 % of its size before the last tenth of its window and overshoots by at most the
-//! given percentage; qualifying runs rank first, each group by the sum of the steps' integral
-//! of absolute error (IAE), the earlier combination first on a tie.
+//! or angle step of the motor's target profiles ([`motor_step_windows`]: the same steps in
+//! every run) is measured on the physical signal until the motor's next change of target (or
+//! the end of the run). A run *qualifies* when every step settles within ±2 % of its size
+//! before the last tenth of its window and overshoots by at most the given percentage;
+//! qualifying runs rank first, each group by the sum of the steps' integral of absolute error
+//! (IAE), the earlier combination first on a tie.
 //!
 //! IAE weighs error only: a loop that chatters (a large kd, say) costs current and heat that
 //! the ranking does not see; the peak current is shown beside it. Every run uses the
@@ -31,7 +32,10 @@
 //! assert!(best.qualifies(5.0));
 //! ```
 
-use crate::scenario::{Controller, MeasuredStep, Scenario, SimError, TargetKind, motor_steps, run};
+use crate::scenario::{
+    Controller, MeasuredStep, Scenario, SimError, StepWindow, TargetKind, measure_step,
+    motor_step_windows, run,
+};
 use rc10_core::motor::dji::DjiConfig;
 use rc10_core::pid::{PidConfig, PidConfigError};
 use std::fmt;
@@ -102,11 +106,12 @@ pub struct Gains {
 /// One run of a sweep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepRun {
-    /// Its place in the grid (kp varies slowest, kd fastest); 0 for the baseline.
-    pub index: usize,
+    /// Its place in the grid (kp varies slowest, kd fastest); `None` for the scenario's own
+    /// gains.
+    pub index: Option<usize>,
     /// The gains it ran with.
     pub gains: Gains,
-    /// Every speed and angle step of the motor, in time order.
+    /// Every speed and angle step of the motor, in time order (the same steps in every run).
     pub steps: Vec<MeasuredStep>,
 }
 
@@ -116,10 +121,12 @@ impl SweepRun {
     pub fn qualifies(&self, max_overshoot_percent: f64) -> bool {
         !self.steps.is_empty()
             && self.steps.iter().all(|s| {
-                let settled_in_time = s
-                    .metrics
-                    .settling_time_s
-                    .is_some_and(|t| t <= 0.9e-3 * s.window_ms as f64);
+                // In whole ms (samples come every ms): settled at 360 ms of a 400 ms window
+                // is in time, whatever the rounding of the seconds.
+                let settled_in_time = s.metrics.settling_time_s.is_some_and(|t| {
+                    let settled_ms = (t * 1e3).round();
+                    settled_ms >= 0.0 && settled_ms * 10.0 <= 9.0 * s.window_ms as f64
+                });
                 settled_in_time && s.metrics.overshoot_percent <= max_overshoot_percent
             })
     }
@@ -179,7 +186,8 @@ pub enum SweepError {
     },
     /// The motor runs RC10_LIB's comparison loop, whose gains are fixed.
     LegacyController,
-    /// The motor has no speed or angle step inside the run to measure.
+    /// The motor has no speed or angle step inside the run to measure (see
+    /// [`motor_step_windows`]).
     NoStep,
     /// The motor's steps mix speeds and angles, whose errors do not add up.
     MixedSteps,
@@ -357,61 +365,47 @@ fn is_angle(kind: TargetKind) -> bool {
 }
 
 /// The motor a sweep tunes when not told: the lowest-numbered rc10 motor with a speed or
-/// angle step before `scenario.duration_ms`, if any.
+/// angle step inside the run ([`motor_step_windows`]), if any.
 pub fn default_motor(scenario: &Scenario) -> Option<usize> {
-    scenario
-        .targets
-        .iter()
-        .filter(|t| {
-            t.kind != TargetKind::Current
-                && t.steps
-                    .iter()
-                    .any(|&(at_ms, _)| at_ms < scenario.duration_ms)
-                && scenario
-                    .motors
-                    .get(t.motor)
-                    .is_some_and(|m| m.controller != Controller::Rc10Legacy)
-        })
-        .map(|t| t.motor)
-        .min()
+    (0..scenario.motors.len()).find(|&motor| {
+        scenario
+            .motors
+            .get(motor)
+            .is_some_and(|m| m.controller != Controller::Rc10Legacy)
+            && !motor_step_windows(&scenario.targets, motor, scenario.duration_ms).is_empty()
+    })
 }
 
 /// The loop a sweep of `motor` tunes when not told: the angle loop if the motor has an
-/// angle target, else the speed loop.
+/// angle step inside the run, else the speed loop.
 pub fn default_loop(scenario: &Scenario, motor: usize) -> Loop {
-    let angle = scenario
-        .targets
-        .iter()
-        .any(|t| t.motor == motor && is_angle(t.kind));
-    if angle { Loop::Angle } else { Loop::Speed }
+    let windows = motor_step_windows(&scenario.targets, motor, scenario.duration_ms);
+    if windows.iter().any(|w| is_angle(w.kind)) {
+        Loop::Angle
+    } else {
+        Loop::Speed
+    }
 }
 
-/// Runs `scenario` once with its own gains and once for every combination of `spec.grid`,
-/// on up to `jobs` threads (at least one, at most [`MAX_JOBS`] and one per combination),
-/// calling `progress` from those threads, in no set order, with the number of runs done so
-/// far. The scenario's other motors and everything else stay as they are; the tuned loop
-/// keeps its other settings (limits, deadband; the cascade sets the angle loop's error
-/// mode).
-pub fn sweep(
-    scenario: &Scenario,
-    spec: &SweepSpec,
-    jobs: usize,
-    progress: &(dyn Fn(usize) + Sync),
-) -> Result<SweepOutcome, SweepError> {
+/// What a sweep runs: the tuned motor's configuration for each combination, in grid order,
+/// and the steps every run is measured on.
+struct Plan {
+    own: Gains,
+    grid: Vec<(Gains, DjiConfig)>,
+    windows: Vec<StepWindow>,
+}
+
+fn plan(scenario: &Scenario, spec: &SweepSpec) -> Result<Plan, SweepError> {
     let base = base_config(scenario, spec.motor)?;
-    let kinds: Vec<TargetKind> = scenario
-        .targets
-        .iter()
-        .filter(|t| t.motor == spec.motor && t.kind != TargetKind::Current && !t.steps.is_empty())
-        .map(|t| t.kind)
-        .collect();
-    if kinds.is_empty() {
+    let windows = motor_step_windows(&scenario.targets, spec.motor, scenario.duration_ms);
+    if windows.is_empty() {
         return Err(SweepError::NoStep);
     }
-    if kinds.iter().any(|&k| is_angle(k)) && kinds.iter().any(|&k| !is_angle(k)) {
+    let angles = windows.iter().filter(|w| is_angle(w.kind)).count();
+    if angles != 0 && angles != windows.len() {
         return Err(SweepError::MixedSteps);
     }
-    if spec.tuned == Loop::Angle && !kinds.iter().any(|&k| is_angle(k)) {
+    if spec.tuned == Loop::Angle && angles == 0 {
         return Err(SweepError::AngleLoopUnused);
     }
     let g = &spec.grid;
@@ -458,8 +452,50 @@ pub fn sweep(
             }
         }
     }
+    Ok(Plan {
+        own: Gains {
+            kp: own.kp,
+            ki: own.ki,
+            kd: own.kd,
+        },
+        grid,
+        windows,
+    })
+}
 
-    let one = |index: usize, gains: Gains, cfg: Option<DjiConfig>| {
+/// Everything [`sweep`] refuses before it runs anything, checked without running: for a
+/// caller that prepares output first.
+pub fn check(scenario: &Scenario, spec: &SweepSpec) -> Result<(), SweepError> {
+    plan(scenario, spec).map(|_| ())
+}
+
+/// Sets the flag if the thread unwinds while it lives: the other threads stop taking runs
+/// when one panics, as when one fails.
+struct StopOnPanic<'a>(&'a AtomicBool);
+
+impl Drop for StopOnPanic<'_> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Runs `scenario` once with its own gains and once for every combination of `spec.grid`,
+/// on up to `jobs` threads (this one included; at least one, at most [`MAX_JOBS`] and one per
+/// combination), calling `progress` from those threads, in no set order, with the number of
+/// runs done so far. The scenario's other motors and everything else stay as they are; the
+/// tuned loop keeps its other settings (limits, deadband; the cascade sets the angle loop's
+/// error mode). Every run keeps its whole trace while it is measured: a long scenario with
+/// many motors takes its trace's memory once per thread.
+pub fn sweep(
+    scenario: &Scenario,
+    spec: &SweepSpec,
+    jobs: usize,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<SweepOutcome, SweepError> {
+    let Plan { own, grid, windows } = plan(scenario, spec)?;
+    let one = |index: Option<usize>, gains: Gains, cfg: Option<DjiConfig>| {
         let mut s = scenario.clone();
         if let (Some(cfg), Some(m)) = (cfg, s.motors.get_mut(spec.motor)) {
             m.controller = Controller::Rc10With(cfg);
@@ -467,32 +503,26 @@ pub fn sweep(
         run(&s).map(|r| SweepRun {
             index,
             gains,
-            steps: motor_steps(&s.targets, &r.samples, spec.motor),
+            steps: windows
+                .iter()
+                .map(|w| measure_step(&r.samples, spec.motor, w))
+                .collect(),
         })
     };
-    let own_gains = Gains {
-        kp: own.kp,
-        ki: own.ki,
-        kd: own.kd,
-    };
-    let baseline = one(0, own_gains, None).map_err(SweepError::Run)?;
-    // Every run has the same steps at the same times: none measured here (every step after
-    // the end of the run), none anywhere.
-    if baseline.steps.is_empty() {
-        return Err(SweepError::NoStep);
-    }
+    let baseline = one(None, own, None).map_err(SweepError::Run)?;
 
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);
     let work = || {
+        let _stop = StopOnPanic(&failed);
         let mut mine = Vec::new();
         while !failed.load(Ordering::Relaxed) {
             let index = next.fetch_add(1, Ordering::Relaxed);
             let Some(&(gains, cfg)) = grid.get(index) else {
                 break;
             };
-            let result = one(index, gains, Some(cfg));
+            let result = one(Some(index), gains, Some(cfg));
             if result.is_err() {
                 // The sweep fails with it: the other threads stop taking runs.
                 failed.store(true, Ordering::Relaxed);
@@ -502,6 +532,7 @@ pub fn sweep(
         }
         mine
     };
+    let count = grid.len();
     let mut results: Vec<(usize, Result<SweepRun, SimError>)> = std::thread::scope(|scope| {
         // Threads the system refuses are done without: this thread works too.
         let helpers: Vec<_> = (1..jobs.clamp(1, count.clamp(1, MAX_JOBS)))
@@ -654,7 +685,12 @@ pub fn write_csv(
     writeln!(out)?;
     let opt = |v: Option<f64>| v.map_or_else(String::new, |s| format!("{:.3}", s * 1e3));
     let baseline = std::iter::once(("scenario".to_string(), &outcome.baseline));
-    let grid = outcome.runs.iter().map(|r| (r.index.to_string(), r));
+    let grid = outcome.runs.iter().map(|r| {
+        let index = r
+            .index
+            .map_or_else(|| "scenario".to_string(), |i| i.to_string());
+        (index, r)
+    });
     for (index, run) in baseline.chain(grid) {
         write!(
             out,
@@ -788,7 +824,8 @@ mod tests {
                 (0.6, 12.0, 0.0)
             ]
         );
-        assert!(out.runs.iter().enumerate().all(|(i, r)| r.index == i));
+        assert!(out.runs.iter().enumerate().all(|(i, r)| r.index == Some(i)));
+        assert_eq!(out.baseline.index, None);
         // The shipped M3508 speed loop is kp 0.6, ki 8: the baseline, and the grid's run of the
         // same gains gives the same figures (the same simulation).
         assert_eq!((out.baseline.gains.kp, out.baseline.gains.ki), (0.6, 8.0));
@@ -805,10 +842,11 @@ mod tests {
     #[test]
     fn every_step_of_a_profile_is_measured_until_the_next() {
         let mut s = scenario("m3508-speed-step");
-        s.targets[0].steps = vec![(0, 0.0), (10, 300.0), (10, 300.0), (200, -100.0)];
+        s.targets[0].steps = vec![(0, 0.0), (10, 300.0), (100, 300.0), (200, -100.0)];
         let out = sweep(&s, &speed_spec(kp_only(vec![0.6])), 1, &|_| {}).unwrap();
         let steps = &out.baseline.steps;
-        // The repeated 300 is no step.
+        // The hold at 0 ms and the repeated 300 at 100 ms are no steps: the first window runs
+        // on to 200 ms.
         assert_eq!(steps.len(), 2, "{steps:?}");
         assert_eq!((steps[0].at_ms, steps[0].window_ms), (10, 190));
         assert_eq!((steps[1].at_ms, steps[1].window_ms), (200, 200));
@@ -828,6 +866,44 @@ mod tests {
     }
 
     #[test]
+    fn the_steps_come_from_the_profiles_alone() {
+        let profile = |kind, steps: Vec<(u64, f32)>| TargetSpec {
+            motor: 0,
+            kind,
+            steps,
+        };
+        let at = |w: &[StepWindow]| -> Vec<(u64, u64, f32)> {
+            w.iter().map(|w| (w.at_ms, w.until_ms, w.value)).collect()
+        };
+        // An opening hold where the motor starts is no step; the step after it runs until
+        // the next change, a current target included; past the run, nothing.
+        let targets = [
+            profile(TargetKind::Rpm, vec![(0, 0.0), (10, 300.0), (50, 300.0)]),
+            profile(TargetKind::Current, vec![(100, 1.0)]),
+            profile(TargetKind::Rpm, vec![(150, -50.0), (400, 10.0)]),
+        ];
+        assert_eq!(
+            at(&motor_step_windows(&targets, 0, 400)),
+            [(10, 100, 300.0), (150, 400, -50.0)]
+        );
+        assert!(motor_step_windows(&targets, 1, 400).is_empty());
+        // Of two entries on one ms, the one a tick applies last; 450° is 90° again, 360° at
+        // the start is where the motor is.
+        let angles = [
+            profile(
+                TargetKind::AngleDeg,
+                vec![(0, 360.0), (10, 90.0), (20, 450.0)],
+            ),
+            profile(TargetKind::AngleDeg, vec![(10, 45.0), (30, -270.0)]),
+        ];
+        assert_eq!(
+            at(&motor_step_windows(&angles, 0, 100)),
+            [(10, 20, 45.0), (20, 100, 450.0)]
+        );
+        // -270° after 450° (90°) is the same angle: no step; the window runs to the end.
+    }
+
+    #[test]
     fn threads_do_not_change_the_figures() {
         let spec = speed_spec(GainGrid {
             kp: vec![0.2, 0.6, 1.2],
@@ -843,11 +919,13 @@ mod tests {
     }
 
     #[test]
-    fn a_loop_too_weak_to_use_the_current_ranks_last() {
+    fn a_loop_too_weak_to_use_the_current_ranks_below_one_that_uses_it() {
         // kp 0.01 A/rpm asks for 3 A at the 300 rpm step, a sixth of the 20 A the C620 can
-        // give: the rise takes several times the full-current minimum, and the integral
-        // (ki 0.1 A per rpm·s) cannot make that up within the 400 ms run. kp 0.6 asks for
-        // 180 A: full current, the fastest rise there is.
+        // give: the rise takes several times the full-current minimum, and with ki 0.1 A per
+        // rpm·s the integral cannot make that up within the 400 ms run; with ki 8 it winds
+        // up against a loop with almost no damping (ζ ≈ 0.03 by the formula of
+        // `a_stiffer_integral_overshoots_and_drops_out_under_a_tight_limit`) and swings far
+        // past. kp 0.6 asks for 180 A: full current, the fastest rise there is.
         let spec = speed_spec(GainGrid {
             kp: vec![0.01, 0.6],
             ki: vec![0.1, 8.0],
@@ -856,20 +934,28 @@ mod tests {
         let s = scenario("m3508-speed-step");
         let out = sweep(&s, &spec, 2, &|_| {}).unwrap();
         let ranked = out.ranked(5.0);
-        assert_eq!(ranked[0].gains.kp, 0.6);
-        let weakest = &out.runs[0];
-        assert_eq!((weakest.gains.kp, weakest.gains.ki), (0.01, 0.1));
-        assert!(!weakest.qualifies(5.0));
-        assert_eq!(ranked.last().map(|r| r.index), Some(0));
+        for run in &ranked[..2] {
+            assert_eq!(run.gains.kp, 0.6, "{run:?}");
+            assert!(run.qualifies(5.0), "{run:?}");
+        }
+        for run in &ranked[2..] {
+            assert_eq!(run.gains.kp, 0.01, "{run:?}");
+            assert!(!run.qualifies(5.0), "{run:?}");
+        }
         let min = min_speed_rise_time_s(
             MotorParams::for_model(s.motors[0].model),
             s.motors[0].load,
             300.0,
         )
         .unwrap();
-        let m = weakest.steps[0].metrics;
-        assert!(m.rise_time_s.is_none_or(|r| r > 3.0 * min), "{m:?}");
-        assert!(weakest.iae() > 2.0 * ranked[0].iae());
+        let weakest = out.runs[0].steps[0].metrics;
+        assert_eq!((out.runs[0].gains.kp, out.runs[0].gains.ki), (0.01, 0.1));
+        assert!(
+            weakest.rise_time_s.is_none_or(|r| r > 3.0 * min),
+            "{weakest:?}"
+        );
+        let swinging = out.runs[1].steps[0].metrics;
+        assert!(swinging.overshoot_percent > 5.0, "{swinging:?}");
     }
 
     fn synthetic(
@@ -879,7 +965,7 @@ mod tests {
         iae: f64,
     ) -> SweepRun {
         SweepRun {
-            index,
+            index: Some(index),
             gains: Gains {
                 kp: index as f32,
                 ki: 0.0,
@@ -906,6 +992,10 @@ mod tests {
     #[test]
     fn qualifying_runs_rank_first_each_group_by_error_then_grid_order() {
         let settled = Some(0.05);
+        // A step at 200 ms settled at the sample of 560 ms, as the metrics compute it.
+        let ms = |t: u64| std::hint::black_box(t) as f64 * 1e-3;
+        let just_in_time_s = ms(560) - ms(200);
+        assert!(just_in_time_s > 0.36);
         let runs = vec![
             synthetic(0, 9.0, settled, 1.0), // overshoots: out, however small its error
             synthetic(1, 1.0, settled, 3.0), // in
@@ -915,18 +1005,25 @@ mod tests {
             synthetic(5, 9.0, settled, 4.0), // out
             // Settled only in the last tenth of its 400 ms window (after 360 ms): out.
             synthetic(6, 0.0, Some(0.37), 0.1),
-            synthetic(7, 0.0, Some(0.36), 5.0), // just in time: in
+            // Just in time: in (as computed from ms stamps, 0.36000000000000004 s).
+            synthetic(7, 0.0, Some(just_in_time_s), 5.0),
         ];
         let outcome = SweepOutcome {
-            baseline: synthetic(0, 0.0, settled, 2.0),
+            baseline: SweepRun {
+                index: None,
+                ..synthetic(0, 0.0, settled, 2.0)
+            },
             runs,
         };
-        let order: Vec<usize> = outcome.ranked(5.0).iter().map(|r| r.index).collect();
+        let indices = |ranked: Vec<&SweepRun>| -> Vec<usize> {
+            ranked.iter().map(|r| r.index.unwrap()).collect()
+        };
+        let order = indices(outcome.ranked(5.0));
         assert_eq!(order, [3, 4, 1, 7, 6, 2, 0, 5]);
         // The baseline's 2.0 ties runs 3 and 4 and ranks after them.
         assert_eq!(outcome.baseline_rank(5.0), 3);
         // With no limit to speak of, only settling counts.
-        let order: Vec<usize> = outcome.ranked(100.0).iter().map(|r| r.index).collect();
+        let order = indices(outcome.ranked(100.0));
         assert_eq!(order, [0, 3, 4, 1, 5, 7, 6, 2]);
         // Nothing measured qualifies for nothing.
         let unmeasured = SweepRun {
@@ -955,7 +1052,7 @@ mod tests {
         assert!(stiff.overshoot_percent > 2.0, "{stiff:?}");
         assert!(out.runs[0].qualifies(1.0));
         assert!(!out.runs[1].qualifies(1.0));
-        assert_eq!(out.ranked(1.0)[0].index, 0);
+        assert_eq!(out.ranked(1.0)[0].index, Some(0));
     }
 
     #[test]
@@ -1053,6 +1150,21 @@ mod tests {
             sweep(&mixed, &with_motor(0), 1, &|_| {}),
             Err(SweepError::MixedSteps)
         );
+        // An opening speed hold before angle steps is no speed step: not mixed.
+        let mut held = scenario("m3508-angle-step");
+        held.targets.insert(
+            0,
+            TargetSpec {
+                motor: 0,
+                kind: TargetKind::Rpm,
+                steps: vec![(0, 0.0)],
+            },
+        );
+        let angle_sweep = SweepSpec {
+            tuned: Loop::Angle,
+            ..with_motor(0)
+        };
+        assert_eq!(check(&held, &angle_sweep), Ok(()));
         let angle_of_speed = SweepSpec {
             tuned: Loop::Angle,
             ..with_motor(0)

@@ -2,7 +2,7 @@
 
 use super::{MotorSample, Sample, TargetKind, TargetSpec};
 use crate::metrics::{StepAccumulator, StepMetrics, step_metrics_of};
-use rc10_core::math::wrap_deg_180;
+use rc10_core::math::{wrap_deg_180, wrap_deg_360};
 
 /// Step metrics of one target profile's last step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -111,90 +111,125 @@ pub(super) fn target_metrics(targets: &[TargetSpec], samples: &[Sample]) -> Vec<
         .collect()
 }
 
-/// One step of a motor's target profiles, measured over its window.
+/// One step of a motor's target profiles and the time it is measured over: from the step
+/// until the motor's next change of target (of any of its profiles, current ones too) or the
+/// end of the run. The same for every run of a scenario (see [`motor_step_windows`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepWindow {
+    /// What was stepped.
+    pub kind: TargetKind,
+    /// The target asked for (rpm or degrees).
+    pub value: f32,
+    /// When, ms.
+    pub at_ms: u64,
+    /// The end of the window, ms (after `at_ms`).
+    pub until_ms: u64,
+}
+
+/// One step of a motor, measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeasuredStep {
     /// What was stepped.
     pub kind: TargetKind,
     /// When, ms.
     pub at_ms: u64,
-    /// How long the response was measured, ms: until the motor's next step (of any of its
-    /// target profiles) or the end of the run.
+    /// How long the response was measured, ms.
     pub window_ms: u64,
-    /// The figures over that window.
+    /// The figures over that window, on the physical signal.
     pub metrics: StepMetrics,
 }
 
-/// Every speed and angle step of `motor`'s target profiles, in time order (profiles in
-/// target order on the same ms), each measured on the physical signal from its step until the
-/// motor's next step of any profile (current ones too) or the end of `samples`.
+/// The speed and angle steps of `motor`'s target profiles in a run of `duration_ms`, in time
+/// order, from the profiles alone (so every run of a scenario measures the same steps):
+/// - of several entries on the same ms, the last in target order (the one a tick applies
+///   last) counts;
+/// - an entry that asks for the target already in force (same kind, same value; angles in
+///   `[0, 360)`) is no step, nor is a first entry that asks for where every simulated motor
+///   starts (0 rpm, 0°): a profile's opening hold;
+/// - entries at or after `duration_ms` are never reached.
 ///
-/// Not steps, and not measured: an entry that repeats the motor's previous one (same kind,
-/// same value), one that asks for where the motor already is (a profile's "hold 0 rpm" at
-/// 0 ms), one with no sample in its window (replaced on the same ms, or after the end). The
-/// motor's last step is measured as [`target_metrics`] measures its profile's last step, to
-/// the bit.
-pub(crate) fn motor_steps(
+/// Current entries are not measured but end the window of the step before them.
+pub fn motor_step_windows(
     targets: &[TargetSpec],
-    samples: &[Sample],
     motor: usize,
-) -> Vec<MeasuredStep> {
+    duration_ms: u64,
+) -> Vec<StepWindow> {
     let mut entries: Vec<(u64, TargetKind, f32)> = targets
         .iter()
         .filter(|t| t.motor == motor)
         .flat_map(|t| t.steps.iter().map(|&(at_ms, value)| (at_ms, t.kind, value)))
+        .filter(|&(at_ms, _, _)| at_ms < duration_ms)
         .collect();
+    // Stable: on the same ms, target order, then profile order.
     entries.sort_by_key(|&(at_ms, _, _)| at_ms);
-    let mut changes: Vec<(u64, TargetKind, f32)> = Vec::with_capacity(entries.len());
-    for e in entries {
-        if changes
-            .last()
-            .is_some_and(|&(_, kind, value)| kind == e.1 && value == e.2)
-        {
-            continue;
-        }
-        changes.push(e);
-    }
-    let end_ms = samples.last().map_or(0, |s| s.t_ms.saturating_add(1));
-    let signal = |kind: TargetKind, s: &MotorSample| match kind {
-        TargetKind::Rpm => s.true_rpm,
-        _ => s.true_total_deg,
+    let in_force = |kind: TargetKind, value: f32| match kind {
+        TargetKind::AngleDeg => wrap_deg_360(value),
+        _ => value,
     };
+    let mut changes: Vec<(u64, TargetKind, f32)> = Vec::with_capacity(entries.len());
+    let mut previous: Option<(TargetKind, f32)> = None;
+    for (i, &(at_ms, kind, value)) in entries.iter().enumerate() {
+        if entries
+            .get(i.saturating_add(1))
+            .is_some_and(|&(next_ms, _, _)| next_ms == at_ms)
+        {
+            continue; // replaced on the same ms
+        }
+        let same = match previous {
+            Some((k, v)) => k == kind && in_force(k, v) == in_force(kind, value),
+            None => kind != TargetKind::Current && in_force(kind, value) == 0.0,
+        };
+        if !same {
+            changes.push((at_ms, kind, value));
+            previous = Some((kind, value));
+        }
+    }
     changes
         .iter()
         .enumerate()
         .filter(|(_, (_, kind, _))| *kind != TargetKind::Current)
-        .filter_map(|(i, &(at_ms, kind, value))| {
-            let until_ms = changes
+        .map(|(i, &(at_ms, kind, value))| StepWindow {
+            kind,
+            value,
+            at_ms,
+            until_ms: changes
                 .get(i.saturating_add(1))
-                .map_or(end_ms, |&(t, _, _)| t);
-            let first = samples.partition_point(|s| s.t_ms < at_ms);
-            let last = samples.partition_point(|s| s.t_ms < until_ms);
-            let window = samples.get(first..last)?;
-            let y0 = signal(kind, window.first()?.motors.get(motor)?);
-            let target = match kind {
-                // The shortest way from where the motor was.
-                TargetKind::AngleDeg => y0 + f64::from(wrap_deg_180(value - y0 as f32)),
-                _ => f64::from(value),
-            };
-            if (target - y0).abs() < 1e-9 {
-                return None;
-            }
-            let series: Vec<(f64, f64, f64)> = window
-                .iter()
-                .filter_map(|s| {
-                    let m = s.motors.get(motor)?;
-                    Some((s.t_ms as f64 * 1e-3, signal(kind, m), m.current_amps))
-                })
-                .collect();
-            Some(MeasuredStep {
-                kind,
-                at_ms,
-                window_ms: until_ms.saturating_sub(at_ms),
-                metrics: step_metrics_of(&series, at_ms as f64 * 1e-3, y0, target),
-            })
+                .map_or(duration_ms, |&(t, _, _)| t),
         })
         .collect()
+}
+
+/// `window` of `motor` measured in `samples` (a run's, one a ms): from the physical value at
+/// its first sample (an angle target taken the short way from there). A window with no
+/// sample of the motor (not from a run) has figures that are NaN or none.
+pub fn measure_step(samples: &[Sample], motor: usize, window: &StepWindow) -> MeasuredStep {
+    let signal = |s: &MotorSample| match window.kind {
+        TargetKind::Rpm => s.true_rpm,
+        _ => s.true_total_deg,
+    };
+    let first = samples.partition_point(|s| s.t_ms < window.at_ms);
+    let last = samples.partition_point(|s| s.t_ms < window.until_ms);
+    let series: Vec<(f64, f64, f64)> = samples
+        .get(first..last)
+        .unwrap_or(&[])
+        .iter()
+        .filter_map(|s| {
+            let m = s.motors.get(motor)?;
+            Some((s.t_ms as f64 * 1e-3, signal(m), m.current_amps))
+        })
+        .collect();
+    let y0 = series.first().map_or(f64::NAN, |&(_, y, _)| y);
+    let target = match window.kind {
+        // The shortest way from where the motor was.
+        TargetKind::AngleDeg => y0 + f64::from(wrap_deg_180(window.value - y0 as f32)),
+        _ => f64::from(window.value),
+    };
+    MeasuredStep {
+        kind: window.kind,
+        at_ms: window.at_ms,
+        window_ms: window.until_ms.saturating_sub(window.at_ms),
+        metrics: step_metrics_of(&series, window.at_ms as f64 * 1e-3, y0, target),
+    }
 }
 
 #[cfg(test)]

@@ -23,8 +23,7 @@ pub mod soak;
 pub use builtin::{builtin, builtin_named};
 pub use chassis_app::{ChassisDrive, ChassisSample};
 pub use faults::Fault;
-pub(crate) use metrics::motor_steps;
-pub use metrics::{MeasuredStep, TargetMetrics};
+pub use metrics::{MeasuredStep, StepWindow, TargetMetrics, measure_step, motor_step_windows};
 pub use observe::{NoObserver, RunObserver, RxDrop, TickEvent, WireEvent};
 pub use run::{run, run_observed, run_with_progress};
 
