@@ -69,6 +69,10 @@ struct SweepArgs {
     /// Threads (default: one per core).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Seeds each combination runs with (the scenario's seed and those after it); its
+    /// figures are the worst of them.
+    #[arg(long, default_value_t = 1)]
+    seeds: u32,
     /// Simulated duration of each run in ms (default: the scenario's).
     #[arg(long)]
     duration_ms: Option<u64>,
@@ -236,6 +240,7 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
         tuned,
         grid,
         max_overshoot_percent: args.max_overshoot,
+        seeds: args.seeds,
     };
     // What the sweep would refuse, before anything is written; then the output folder,
     // before the runs: a long sweep should not end in a folder that cannot be made.
@@ -243,11 +248,19 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     std::fs::create_dir_all(&args.out)
         .map_err(|e| format!("creating {}: {e}", args.out.display()))?;
     say(&format!(
-        "sweep     {}, motor {}, {tuned} loop: {runs} run(s) of {} ms on {} thread(s), and one \
-         with the scenario's gains (its would-be rank in brackets)\n\n",
+        "sweep     {}, motor {}, {tuned} loop: {runs} combination(s) of {} ms{} on {} \
+         thread(s), and the scenario's gains (their would-be rank in brackets)\n\n",
         scenario.name,
         motor + 1,
         scenario.duration_ms,
+        if args.seeds > 1 {
+            format!(
+                ", each with {} seeds from {} (the worst shown)",
+                args.seeds, scenario.seed
+            )
+        } else {
+            String::new()
+        },
         jobs.min(runs).min(sweep::MAX_JOBS)
     ));
     let started = std::time::Instant::now();
@@ -287,7 +300,7 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     sweep::write_csv(&outcome, args.max_overshoot, &csv)
         .map_err(|e| format!("writing {}: {e}", csv.display()))?;
     say(&format!("wrote     {}\n", csv.display()));
-    let total = outcome.runs.len() + 1;
+    let total = (outcome.runs.len() + 1) * args.seeds as usize;
     say(&format!(
         "speed     {total} runs in {wall:.2} s ({:.0} runs a second, {:.0} x real time in all)\n",
         total as f64 / wall.max(1e-9),

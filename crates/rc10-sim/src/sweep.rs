@@ -12,9 +12,10 @@
 //! (IAE), the earlier combination first on a tie.
 //!
 //! IAE weighs error only: a loop that chatters (a large kd, say) costs current and heat that
-//! the ranking does not see; the peak current is shown beside it. Every run uses the
-//! scenario's one seed (ESC phases, random faults): gains that win by a hair may not win
-//! under another seed.
+//! the ranking does not see; the peak current is shown beside it. A run uses the scenario's
+//! seed (ESC phases, random faults), and gains that win by a hair under one seed may not win
+//! under another: [`SweepSpec::seeds`] runs each combination under several and keeps the
+//! worst figures of each step.
 //!
 //! ```
 //! use rc10_sim::scenario::builtin_named;
@@ -25,6 +26,7 @@
 //!     tuned: Loop::Speed,
 //!     grid: GainGrid { kp: vec![0.3, 0.6], ki: vec![8.0], kd: vec![] },
 //!     max_overshoot_percent: 5.0,
+//!     seeds: 1,
 //! };
 //! let outcome = sweep(&scenario, &spec, 1, &|_| {}).unwrap();
 //! assert_eq!(outcome.runs.len(), 2);
@@ -90,6 +92,11 @@ pub struct SweepSpec {
     pub grid: GainGrid,
     /// The largest overshoot, percent of the step, a run may have and qualify.
     pub max_overshoot_percent: f64,
+    /// How many seeds each combination runs with: the scenario's and the `seeds − 1` after
+    /// it (ESC feedback phases, random faults). Its figures are the worst of them, step by
+    /// step (the longest rise and settling, the largest overshoot, error, IAE and current):
+    /// gains that rank well hold up under every seed. At least 1.
+    pub seeds: u32,
 }
 
 /// One loop's three gains, in the units of [`GainGrid`].
@@ -195,9 +202,11 @@ pub enum SweepError {
     AngleLoopUnused,
     /// No list of candidates: the sweep would be the scenario's own run.
     NothingToSweep,
-    /// More combinations than [`MAX_RUNS`].
+    /// Zero seeds: nothing would run.
+    NoSeeds,
+    /// More runs (combinations times seeds) than [`MAX_RUNS`].
     TooManyRuns {
-        /// How many the lists make (saturated).
+        /// How many the lists and seeds make (saturated).
         runs: usize,
     },
     /// A candidate is not a valid gain.
@@ -235,9 +244,10 @@ impl fmt::Display for SweepError {
             SweepError::NothingToSweep => {
                 f.write_str("no candidate gains: give at least one list (kp, ki or kd)")
             }
+            SweepError::NoSeeds => f.write_str("at least one seed"),
             SweepError::TooManyRuns { runs } => write!(
                 f,
-                "{runs} combinations: at most {MAX_RUNS} (fewer values per gain)"
+                "{runs} runs: at most {MAX_RUNS} (fewer values per gain, or fewer seeds)"
             ),
             SweepError::InvalidGains { gains, error } => write!(
                 f,
@@ -387,6 +397,33 @@ pub fn default_loop(scenario: &Scenario, motor: usize) -> Loop {
     }
 }
 
+/// The worse of two seeds' figures of one step, figure by figure (`a`'s start and target):
+/// the longer rise and settling (none if either has none), the larger overshoot, steady
+/// error, IAE and current (NaN if either is NaN).
+fn worse(a: &MeasuredStep, b: &MeasuredStep) -> MeasuredStep {
+    let larger = |x: f64, y: f64| {
+        if x.is_nan() || y.is_nan() {
+            f64::NAN
+        } else {
+            x.max(y)
+        }
+    };
+    let later = |x: Option<f64>, y: Option<f64>| Some(larger(x?, y?));
+    let (m, n) = (&a.metrics, &b.metrics);
+    MeasuredStep {
+        metrics: crate::metrics::StepMetrics {
+            rise_time_s: later(m.rise_time_s, n.rise_time_s),
+            overshoot_percent: larger(m.overshoot_percent, n.overshoot_percent),
+            settling_time_s: later(m.settling_time_s, n.settling_time_s),
+            steady_state_error: larger(m.steady_state_error, n.steady_state_error),
+            iae: larger(m.iae, n.iae),
+            peak_current_amps: larger(m.peak_current_amps, n.peak_current_amps),
+            ..*m
+        },
+        ..*a
+    }
+}
+
 /// What a sweep runs: the tuned motor's configuration for each combination, in grid order,
 /// and the steps every run is measured on.
 struct Plan {
@@ -428,12 +465,16 @@ fn plan(scenario: &Scenario, spec: &SweepSpec) -> Result<Plan, SweepError> {
         or_own(&g.ki, own.ki),
         or_own(&g.kd, own.kd),
     );
+    if spec.seeds == 0 {
+        return Err(SweepError::NoSeeds);
+    }
     let count = kps
         .len()
         .saturating_mul(kis.len())
         .saturating_mul(kds.len());
-    if count > MAX_RUNS {
-        return Err(SweepError::TooManyRuns { runs: count });
+    let runs = count.saturating_mul(spec.seeds as usize);
+    if runs > MAX_RUNS {
+        return Err(SweepError::TooManyRuns { runs });
     }
     let mut grid = Vec::with_capacity(count);
     for &kp in &kps {
@@ -500,13 +541,26 @@ pub fn sweep(
         if let (Some(cfg), Some(m)) = (cfg, s.motors.get_mut(spec.motor)) {
             m.controller = Controller::Rc10With(cfg);
         }
-        run(&s).map(|r| SweepRun {
+        let mut steps: Option<Vec<MeasuredStep>> = None;
+        for k in 0..spec.seeds {
+            s.seed = scenario.seed.wrapping_add(u64::from(k));
+            let r = run(&s)?;
+            let these = windows
+                .iter()
+                .map(|w| measure_step(&r.samples, spec.motor, w));
+            steps = Some(match steps {
+                None => these.collect(),
+                Some(so_far) => so_far
+                    .iter()
+                    .zip(these)
+                    .map(|(a, b)| worse(a, &b))
+                    .collect(),
+            });
+        }
+        Ok(SweepRun {
             index,
             gains,
-            steps: windows
-                .iter()
-                .map(|w| measure_step(&r.samples, spec.motor, w))
-                .collect(),
+            steps: steps.unwrap_or_default(),
         })
     };
     let baseline = one(None, own, None).map_err(SweepError::Run)?;
@@ -736,6 +790,7 @@ mod tests {
             tuned: Loop::Speed,
             grid,
             max_overshoot_percent: 5.0,
+            seeds: 1,
         }
     }
 
@@ -1064,6 +1119,7 @@ mod tests {
             tuned: Loop::Angle,
             grid: kp_only(vec![1.0, 8.0]),
             max_overshoot_percent: 5.0,
+            seeds: 1,
         };
         let out = sweep(&s, &spec, 2, &|_| {}).unwrap();
         // The shipped angle loop is kp 8 rpm/deg: the grid's second run is the baseline.
@@ -1192,6 +1248,61 @@ mod tests {
         assert_eq!(
             sweep(&s, &huge, 1, &|_| {}),
             Err(SweepError::TooManyRuns { runs: 1_000_000 })
+        );
+    }
+
+    #[test]
+    fn several_seeds_give_each_step_the_worst_of_them() {
+        // Motor 2 of the power-cut scenario runs through 5 % frame loss and 1 % corrupted
+        // frames: each seed loses other frames.
+        let s = scenario("fault-power-cut");
+        let spec = |seeds| SweepSpec {
+            motor: 1,
+            seeds,
+            ..speed_spec(kp_only(vec![0.3, 0.6]))
+        };
+        let all = sweep(&s, &spec(3), 2, &|_| {}).unwrap();
+        let each: Vec<SweepOutcome> = (0..3)
+            .map(|k| {
+                let mut seeded = s.clone();
+                seeded.seed = s.seed + k;
+                sweep(&seeded, &spec(1), 1, &|_| {}).unwrap()
+            })
+            .collect();
+        let iae = |o: &SweepOutcome, run: usize| o.runs[run].steps[0].metrics.iae;
+        assert!(
+            iae(&each[0], 0) != iae(&each[1], 0) || iae(&each[0], 0) != iae(&each[2], 0),
+            "the seed changes nothing"
+        );
+        for run in 0..2 {
+            let worst = |f: fn(&StepMetrics) -> f64| {
+                each.iter()
+                    .map(|o| f(&o.runs[run].steps[0].metrics))
+                    .fold(f64::MIN, f64::max)
+            };
+            let m = all.runs[run].steps[0].metrics;
+            assert_eq!(m.iae, worst(|m| m.iae));
+            assert_eq!(m.overshoot_percent, worst(|m| m.overshoot_percent));
+            assert_eq!(m.peak_current_amps, worst(|m| m.peak_current_amps));
+            assert_eq!(m.steady_state_error, worst(|m| m.steady_state_error));
+            let settled: Option<Vec<f64>> = each
+                .iter()
+                .map(|o| o.runs[run].steps[0].metrics.settling_time_s)
+                .collect();
+            assert_eq!(
+                m.settling_time_s,
+                settled.map(|t| t.into_iter().fold(f64::MIN, f64::max))
+            );
+        }
+        assert_eq!(sweep(&s, &spec(0), 1, &|_| {}), Err(SweepError::NoSeeds));
+        let many = SweepSpec {
+            seeds: 200,
+            grid: kp_only(vec![1.0; 1000]),
+            ..spec(1)
+        };
+        assert_eq!(
+            sweep(&s, &many, 1, &|_| {}),
+            Err(SweepError::TooManyRuns { runs: 200_000 })
         );
     }
 

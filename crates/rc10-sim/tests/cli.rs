@@ -38,7 +38,10 @@ fn sweep_prints_the_ranking_and_writes_every_run() {
     ]);
     let stdout = text(&o.stdout);
     assert!(o.status.success(), "{stdout}{}", text(&o.stderr));
-    assert!(stdout.contains("motor 1, speed loop: 4 run(s)"), "{stdout}");
+    assert!(
+        stdout.contains("motor 1, speed loop: 4 combination(s) of 400 ms"),
+        "{stdout}"
+    );
     // The scenario's row, then the four runs best first: kp 0.6 (180 A asked for at the
     // step: full current, it settles within 50 ms) before kp 0.01 (3 A, a sixth of the C620's
     // 20 A: too slow with ki 0.1, barely damped with ki 8; neither qualifies).
@@ -82,6 +85,10 @@ fn sweep_refuses_bad_arguments_with_a_reason() {
             "--jobs must be 1 or more",
         ),
         (&["sweep"][..], "no candidate gains"),
+        (
+            &["sweep", "--kp", "1", "--seeds", "0"][..],
+            "at least one seed",
+        ),
         (&["sweep", "--kp", "1,1"][..], "--kp: 1 comes twice"),
         (
             &["sweep", "--loop", "angle", "--kp", "1"][..],
