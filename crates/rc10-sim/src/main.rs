@@ -235,6 +235,11 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     if jobs == 0 {
         return Err("--jobs must be 1 or more".into());
     }
+    if args.seeds == 0 {
+        return Err("--seeds must be 1 or more".into());
+    }
+    // Every simulation: the scenario's gains and each combination, under each seed.
+    let simulations = runs.saturating_add(1).saturating_mul(args.seeds as usize);
     let spec = SweepSpec {
         motor,
         tuned,
@@ -261,7 +266,7 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
         } else {
             String::new()
         },
-        jobs.min(runs).min(sweep::MAX_JOBS)
+        jobs.min(simulations).min(sweep::MAX_JOBS)
     ));
     let started = std::time::Instant::now();
     // On a terminal only (a pipe or a log gets the table alone), and only ever forwards: the
@@ -270,16 +275,16 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     let shown = std::sync::Mutex::new(0usize);
     let progress = |done: usize| {
         if terminal
-            && runs >= 20
+            && simulations >= 20
             && let Ok(mut shown) = shown.lock()
             && *shown < done
         {
             *shown = done;
-            eprint!("\r  {done} / {runs}");
+            eprint!("\r  {done} / {simulations} simulations");
         }
     };
     let outcome = sweep::sweep(&scenario, &spec, jobs, &progress);
-    if terminal && runs >= 20 {
+    if terminal && simulations >= 20 {
         eprintln!();
     }
     let outcome = outcome.map_err(|e| format!("sweep of `{}`: {e}", scenario.name))?;
@@ -291,8 +296,8 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
         .filter(|r| r.qualifies(args.max_overshoot))
         .count();
     say(&format!(
-        "\nqualified {qualified} of {} runs (every step settles within +/-2 % before the last \
-         tenth of its window, overshoot <= {} %)\n",
+        "\nqualified {qualified} of {} combinations (every step settles within +/-2 % before \
+         the last tenth of its window, overshoot <= {} %)\n",
         outcome.runs.len(),
         args.max_overshoot
     ));
@@ -300,11 +305,11 @@ fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
     sweep::write_csv(&outcome, args.max_overshoot, &csv)
         .map_err(|e| format!("writing {}: {e}", csv.display()))?;
     say(&format!("wrote     {}\n", csv.display()));
-    let total = (outcome.runs.len() + 1) * args.seeds as usize;
     say(&format!(
-        "speed     {total} runs in {wall:.2} s ({:.0} runs a second, {:.0} x real time in all)\n",
-        total as f64 / wall.max(1e-9),
-        total as f64 * scenario.duration_ms as f64 * 1e-3 / wall.max(1e-9)
+        "speed     {simulations} simulations in {wall:.2} s ({:.0} a second, {:.0} x real time \
+         in all)\n",
+        simulations as f64 / wall.max(1e-9),
+        simulations as f64 * scenario.duration_ms as f64 * 1e-3 / wall.max(1e-9)
     ));
     Ok(())
 }

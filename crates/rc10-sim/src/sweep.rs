@@ -1,6 +1,6 @@
-//! Gain sweeps: a scenario run once for every combination of candidate gains of one motor's
-//! speed or angle loop, on every core, each run ranked by how well the motor followed its
-//! steps.
+//! Gain sweeps: a scenario run once (or once per seed) for every combination of candidate
+//! gains of one motor's speed or angle loop, on every core, each combination ranked by how
+//! well the motor followed its steps.
 //!
 //! Every run is the whole simulation (bus, plants, rc10's real drivers), deterministic: the
 //! same scenario and gains give the same figures whatever the number of threads. Each speed
@@ -93,9 +93,10 @@ pub struct SweepSpec {
     /// The largest overshoot, percent of the step, a run may have and qualify.
     pub max_overshoot_percent: f64,
     /// How many seeds each combination runs with: the scenario's and the `seeds − 1` after
-    /// it (ESC feedback phases, random faults). Its figures are the worst of them, step by
-    /// step (the longest rise and settling, the largest overshoot, error, IAE and current):
-    /// gains that rank well hold up under every seed. At least 1.
+    /// it (ESC feedback phases, random faults). Each figure of each step is the worst of them
+    /// on its own (the longest rise and settling, the largest overshoot, error, IAE and
+    /// current; one row can mix seeds), its start and target the first seed's: gains that
+    /// rank well hold up under every seed. At least 1.
     pub seeds: u32,
 }
 
@@ -110,7 +111,8 @@ pub struct Gains {
     pub kd: f32,
 }
 
-/// One run of a sweep.
+/// One combination of a sweep: its run's figures, or with several seeds the worst of its
+/// runs'.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepRun {
     /// Its place in the grid (kp varies slowest, kd fastest); `None` for the scenario's own
@@ -522,10 +524,10 @@ impl Drop for StopOnPanic<'_> {
     }
 }
 
-/// Runs `scenario` once with its own gains and once for every combination of `spec.grid`,
-/// on up to `jobs` threads (this one included; at least one, at most [`MAX_JOBS`] and one per
-/// combination), calling `progress` from those threads, in no set order, with the number of
-/// runs done so far. The scenario's other motors and everything else stay as they are; the
+/// Runs `scenario` with its own gains and with every combination of `spec.grid`, each
+/// under `spec.seeds` seeds, on up to `jobs` threads (this one included; at least one, at
+/// most [`MAX_JOBS`] and one per simulation), calling `progress` from those threads, in no
+/// set order, with the number of simulations done so far (of `(combinations + 1) · seeds`). The scenario's other motors and everything else stay as they are; the
 /// tuned loop keeps its other settings (limits, deadband; the cascade sets the angle loop's
 /// error mode). Every run keeps its whole trace while it is measured: a long scenario with
 /// many motors takes its trace's memory once per thread.
@@ -536,34 +538,26 @@ pub fn sweep(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SweepOutcome, SweepError> {
     let Plan { own, grid, windows } = plan(scenario, spec)?;
-    let one = |index: Option<usize>, gains: Gains, cfg: Option<DjiConfig>| {
+    let seeds = spec.seeds as usize;
+    // Simulation `t` is seed `t % seeds` of combination `t / seeds`: the scenario's own gains
+    // (0), then the grid's, so every simulation, the baseline's too, is shared out alike.
+    let total = grid.len().saturating_add(1).saturating_mul(seeds);
+    let simulate = |t: usize| -> Result<Vec<MeasuredStep>, SimError> {
         let mut s = scenario.clone();
-        if let (Some(cfg), Some(m)) = (cfg, s.motors.get_mut(spec.motor)) {
-            m.controller = Controller::Rc10With(cfg);
+        let combination = t.checked_div(seeds).unwrap_or(0);
+        if let Some((_, cfg)) = combination.checked_sub(1).and_then(|i| grid.get(i))
+            && let Some(m) = s.motors.get_mut(spec.motor)
+        {
+            m.controller = Controller::Rc10With(*cfg);
         }
-        let mut steps: Option<Vec<MeasuredStep>> = None;
-        for k in 0..spec.seeds {
-            s.seed = scenario.seed.wrapping_add(u64::from(k));
-            let r = run(&s)?;
-            let these = windows
-                .iter()
-                .map(|w| measure_step(&r.samples, spec.motor, w));
-            steps = Some(match steps {
-                None => these.collect(),
-                Some(so_far) => so_far
-                    .iter()
-                    .zip(these)
-                    .map(|(a, b)| worse(a, &b))
-                    .collect(),
-            });
-        }
-        Ok(SweepRun {
-            index,
-            gains,
-            steps: steps.unwrap_or_default(),
-        })
+        let k = t.checked_rem(seeds).unwrap_or(0) as u64;
+        s.seed = scenario.seed.wrapping_add(k);
+        let r = run(&s)?;
+        Ok(windows
+            .iter()
+            .map(|w| measure_step(&r.samples, spec.motor, w))
+            .collect())
     };
-    let baseline = one(None, own, None).map_err(SweepError::Run)?;
 
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
@@ -572,42 +566,65 @@ pub fn sweep(
         let _stop = StopOnPanic(&failed);
         let mut mine = Vec::new();
         while !failed.load(Ordering::Relaxed) {
-            let index = next.fetch_add(1, Ordering::Relaxed);
-            let Some(&(gains, cfg)) = grid.get(index) else {
+            let t = next.fetch_add(1, Ordering::Relaxed);
+            if t >= total {
                 break;
-            };
-            let result = one(Some(index), gains, Some(cfg));
+            }
+            let result = simulate(t);
             if result.is_err() {
                 // The sweep fails with it: the other threads stop taking runs.
                 failed.store(true, Ordering::Relaxed);
             }
-            mine.push((index, result));
+            mine.push((t, result));
             progress(done.fetch_add(1, Ordering::Relaxed).saturating_add(1));
         }
         mine
     };
-    let count = grid.len();
-    let mut results: Vec<(usize, Result<SweepRun, SimError>)> = std::thread::scope(|scope| {
-        // Threads the system refuses are done without: this thread works too.
-        let helpers: Vec<_> = (1..jobs.clamp(1, count.clamp(1, MAX_JOBS)))
-            .filter_map(|_| std::thread::Builder::new().spawn_scoped(scope, work).ok())
-            .collect();
-        let mut all = work();
-        for helper in helpers {
-            match helper.join() {
-                Ok(mine) => all.extend(mine),
-                // A run that panicked takes the sweep down with it, as it would alone.
-                Err(panic) => std::panic::resume_unwind(panic),
+    let mut results: Vec<(usize, Result<Vec<MeasuredStep>, SimError>)> =
+        std::thread::scope(|scope| {
+            // Threads the system refuses are done without: this thread works too.
+            let helpers: Vec<_> = (1..jobs.clamp(1, total.clamp(1, MAX_JOBS)))
+                .filter_map(|_| std::thread::Builder::new().spawn_scoped(scope, work).ok())
+                .collect();
+            let mut all = work();
+            for helper in helpers {
+                match helper.join() {
+                    Ok(mine) => all.extend(mine),
+                    // A run that panicked takes the sweep down with it, as it would alone.
+                    Err(panic) => std::panic::resume_unwind(panic),
+                }
             }
-        }
-        all
-    });
-    results.sort_by_key(|(index, _)| *index);
-    let runs = results
+            all
+        });
+    results.sort_by_key(|(t, _)| *t);
+    let simulations = results
         .into_iter()
         .map(|(_, r)| r)
         .collect::<Result<Vec<_>, _>>()
         .map_err(SweepError::Run)?;
+    // Each combination's seeds, in seed order, folded into its worst figures.
+    let mut folded = simulations.chunks(seeds.max(1)).map(|of_one| {
+        let mut seeds = of_one.iter();
+        let first = seeds.next().cloned().unwrap_or_default();
+        seeds.fold(first, |so_far, these| {
+            so_far.iter().zip(these).map(|(a, b)| worse(a, b)).collect()
+        })
+    });
+    let baseline = SweepRun {
+        index: None,
+        gains: own,
+        steps: folded.next().unwrap_or_default(),
+    };
+    let runs = grid
+        .iter()
+        .zip(folded)
+        .enumerate()
+        .map(|(index, (&(gains, _), steps))| SweepRun {
+            index: Some(index),
+            gains,
+            steps,
+        })
+        .collect();
     Ok(SweepOutcome { baseline, runs })
 }
 
@@ -971,6 +988,12 @@ mod tests {
         let many = sweep(&s, &spec, usize::MAX, &|_| {}).unwrap();
         assert_eq!(one, two);
         assert_eq!(one, many);
+        // Seeds of one combination shared out between threads fold the same.
+        let seeded = SweepSpec { seeds: 3, ..spec };
+        assert_eq!(
+            sweep(&s, &seeded, 1, &|_| {}).unwrap(),
+            sweep(&s, &seeded, 4, &|_| {}).unwrap()
+        );
     }
 
     #[test]
@@ -1294,6 +1317,11 @@ mod tests {
                 settled.map(|t| t.into_iter().fold(f64::MIN, f64::max))
             );
         }
+        // Neither the first seed's figures nor the last's: the worst of each figure.
+        let differs = |k: usize| {
+            (0..2).any(|run| all.runs[run].steps[0].metrics != each[k].runs[run].steps[0].metrics)
+        };
+        assert!(differs(0) && differs(2));
         assert_eq!(sweep(&s, &spec(0), 1, &|_| {}), Err(SweepError::NoSeeds));
         let many = SweepSpec {
             seeds: 200,
@@ -1307,17 +1335,21 @@ mod tests {
     }
 
     #[test]
-    fn progress_counts_every_run() {
+    fn progress_counts_every_simulation() {
         let calls = AtomicUsize::new(0);
         let highest = AtomicUsize::new(0);
-        let spec = speed_spec(kp_only(vec![0.4, 0.5, 0.6]));
+        let spec = SweepSpec {
+            seeds: 2,
+            ..speed_spec(kp_only(vec![0.4, 0.5, 0.6]))
+        };
         sweep(&scenario("m3508-speed-step"), &spec, 2, &|n| {
             calls.fetch_add(1, Ordering::Relaxed);
             highest.fetch_max(n, Ordering::Relaxed);
         })
         .unwrap();
-        assert_eq!(calls.load(Ordering::Relaxed), 3);
-        assert_eq!(highest.load(Ordering::Relaxed), 3);
+        // The scenario's gains and three combinations, under two seeds each.
+        assert_eq!(calls.load(Ordering::Relaxed), 8);
+        assert_eq!(highest.load(Ordering::Relaxed), 8);
     }
 
     #[test]

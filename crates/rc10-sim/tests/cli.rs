@@ -87,7 +87,7 @@ fn sweep_refuses_bad_arguments_with_a_reason() {
         (&["sweep"][..], "no candidate gains"),
         (
             &["sweep", "--kp", "1", "--seeds", "0"][..],
-            "at least one seed",
+            "--seeds must be 1 or more",
         ),
         (&["sweep", "--kp", "1,1"][..], "--kp: 1 comes twice"),
         (
