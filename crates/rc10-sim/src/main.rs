@@ -38,11 +38,24 @@ enum LoopArg {
     Angle,
 }
 
-#[derive(Debug, Parser)]
-struct SweepArgs {
+/// The scenario a command runs, and what the command line changes of it.
+#[derive(Debug, clap::Args)]
+struct ScenarioArgs {
     /// Built-in scenario name (see `list`) or a scenario file (`*.toml`).
     #[arg(default_value = "m3508-speed-step")]
     scenario: String,
+    /// Simulated duration in ms, of each run of a sweep (default: the scenario's).
+    #[arg(long)]
+    duration_ms: Option<u64>,
+    /// Seed for everything random (a sweep's first seed).
+    #[arg(long)]
+    seed: Option<u64>,
+}
+
+#[derive(Debug, Parser)]
+struct SweepArgs {
+    #[command(flatten)]
+    which: ScenarioArgs,
     /// The motor whose loop is tuned, 1 for the scenario's first (default: the first motor with
     /// a speed or angle step).
     #[arg(long)]
@@ -73,28 +86,15 @@ struct SweepArgs {
     /// figures are the worst of them.
     #[arg(long, default_value_t = 1)]
     seeds: u32,
-    /// Simulated duration of each run in ms (default: the scenario's).
-    #[arg(long)]
-    duration_ms: Option<u64>,
-    /// Seed for everything random.
-    #[arg(long)]
-    seed: Option<u64>,
-    /// Output folder for sweep.csv (every run's gains and figures).
+    /// Output folder for sweep.csv (every combination's gains and figures).
     #[arg(long, default_value = "sim-out")]
     out: PathBuf,
 }
 
 #[derive(Debug, Parser)]
 struct RunArgs {
-    /// Built-in scenario name (see `list`) or a scenario file (`*.toml`).
-    #[arg(default_value = "m3508-speed-step")]
-    scenario: String,
-    /// Simulated duration in ms (default: the scenario's).
-    #[arg(long)]
-    duration_ms: Option<u64>,
-    /// Seed for everything random.
-    #[arg(long)]
-    seed: Option<u64>,
+    #[command(flatten)]
+    which: ScenarioArgs,
     /// Output folder for the CSV trace and SVG plot.
     #[arg(long, default_value = "sim-out")]
     out: PathBuf,
@@ -125,10 +125,10 @@ fn find(name: &str) -> Result<Scenario, String> {
     })
 }
 
-/// The scenario named `name`, with the duration and seed given on the command line.
-fn find_with(name: &str, duration_ms: Option<u64>, seed: Option<u64>) -> Result<Scenario, String> {
-    let mut scenario = find(name)?;
-    if let Some(d) = duration_ms {
+/// The scenario named on the command line, with the duration and seed given there.
+fn find_with(which: &ScenarioArgs) -> Result<Scenario, String> {
+    let mut scenario = find(&which.scenario)?;
+    if let Some(d) = which.duration_ms {
         if !(1..=rc10_sim::file::MAX_DURATION_MS).contains(&d) {
             return Err(format!(
                 "--duration-ms must be 1 to {} (a day)",
@@ -137,14 +137,14 @@ fn find_with(name: &str, duration_ms: Option<u64>, seed: Option<u64>) -> Result<
         }
         scenario.duration_ms = d;
     }
-    if let Some(s) = seed {
+    if let Some(s) = which.seed {
         scenario.seed = s;
     }
     Ok(scenario)
 }
 
 fn run_cmd(args: RunArgs) -> Result<(), String> {
-    let scenario = find_with(&args.scenario, args.duration_ms, args.seed)?;
+    let scenario = find_with(&args.which)?;
     let started = std::time::Instant::now();
     let total_ms = scenario.duration_ms;
     let mut progress = |t_ms: u64| {
@@ -201,7 +201,7 @@ fn run_cmd(args: RunArgs) -> Result<(), String> {
 }
 
 fn sweep_cmd(args: SweepArgs) -> Result<(), String> {
-    let scenario = find_with(&args.scenario, args.duration_ms, args.seed)?;
+    let scenario = find_with(&args.which)?;
     let motor = match args.motor {
         Some(0) => return Err("--motor counts from 1".into()),
         Some(n) => n - 1,

@@ -9,7 +9,8 @@ use std::io;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-fn opt_ms(v: Option<f64>) -> String {
+/// A time in seconds as ms with one decimal, or "never".
+pub(crate) fn opt_ms(v: Option<f64>) -> String {
     v.map_or_else(|| "never".to_string(), |s| format!("{:.1} ms", s * 1e3))
 }
 
@@ -19,7 +20,8 @@ fn whole(v: f64) -> String {
     format!("{}", if r == 0.0 { 0.0 } else { r })
 }
 
-fn unit(kind: TargetKind) -> &'static str {
+/// The unit of a target kind's values.
+pub(crate) fn unit(kind: TargetKind) -> &'static str {
     match kind {
         TargetKind::Current => "A",
         TargetKind::Rpm => "rpm",

@@ -676,17 +676,13 @@ fn gain(v: f32) -> String {
     }
 }
 
-fn ms(v: Option<f64>) -> String {
-    v.map_or_else(|| "never".to_string(), |s| format!("{:.1} ms", s * 1e3))
-}
-
-/// The unit of the steps' error (rpm or deg).
+/// The unit of the steps' error (rpm or deg; the sweep refuses mixed steps).
 fn error_unit(outcome: &SweepOutcome) -> &'static str {
-    match outcome.baseline.steps.first().map(|s| s.kind) {
-        Some(TargetKind::AngleDeg | TargetKind::TotalAngleDeg) => "deg",
-        Some(TargetKind::Current) => "A",
-        Some(TargetKind::Rpm) | None => "rpm",
-    }
+    outcome
+        .baseline
+        .steps
+        .first()
+        .map_or("rpm", |s| crate::output::unit(s.kind))
 }
 
 /// The scenario's own gains (with the rank they would have), then the best `top` runs, as a
@@ -708,9 +704,9 @@ pub fn table(outcome: &SweepOutcome, max_overshoot_percent: f64, top: usize) -> 
             gain(run.gains.kp),
             gain(run.gains.ki),
             gain(run.gains.kd),
-            ms(r.rise_s),
+            crate::output::opt_ms(r.rise_s),
             r.overshoot_percent,
-            ms(r.settling_s),
+            crate::output::opt_ms(r.settling_s),
             r.steady_error,
             format!("{:.3} {u}·s", r.iae),
             r.peak_amps,
