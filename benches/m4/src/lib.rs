@@ -8,8 +8,11 @@
 //! cycle counter does not run under QEMU. Output goes through semihosting.
 //!
 //! This crate touches the timer's registers directly (four volatile accesses); everything it
-//! measures is rc10-core's safe code.
+//! measures is safe code: rc10-core's, and the [`reference`] motors' that the goals are
+//! weighed against.
 #![no_std]
+
+pub mod reference;
 
 use core::hint::black_box;
 use core::sync::atomic::{Ordering, compiler_fence};

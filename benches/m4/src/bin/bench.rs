@@ -5,14 +5,18 @@
 //! Scenarios: DJI M3508s (1, 4, and 8 on two buses) in speed and in angle mode with feedback
 //! that changes every tick (one `Bus::tick` each: update + pack, send excluded); one feedback
 //! frame routed and parsed among 4 motors at start and after 10⁶ frames at full speed; one
-//! step of each PID kind; one `DeltaTime` update.
+//! step of each PID kind; one `DeltaTime` update. Then the same tick and frame for the
+//! reference motors of `rc10_bench_m4::reference` (the least this shape costs), printed
+//! for comparison and not tracked.
 #![no_std]
 #![no_main]
 
+use core::cell::RefCell;
 use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
+use rc10_bench_m4::reference::{self, Lock, Node, RefMotor, State};
 use rc10_bench_m4::{Calibration, min_median_max, ticks, timer_start};
 use rc10_core::bus::{Bus, BusBuilder};
 use rc10_core::can::CanFrame;
@@ -83,6 +87,12 @@ impl Figures {
         };
         hprintln!("figure {} {}", name, value);
     }
+
+    /// A row of the reference motors: printed, not tracked.
+    fn reference_row(&self, name: &str, samples: &mut [u32]) {
+        let (min, median, max) = min_median_max(samples);
+        hprintln!("{:<34} {:>7} {:>7} {:>7}", name, min, median, max);
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -139,6 +149,81 @@ fn tick_samples(f: &Figures, motors: &'static [DjiMotor], mode: Mode, out: &mut 
     for m in motors {
         m.disable();
     }
+}
+
+/// Checked reference motors shared as rc10's are (behind a critical section).
+static CHECKED: [RefMotor<Locked, true, false>; 4] = [
+    RefMotor::new(locked(), 0),
+    RefMotor::new(locked(), 1),
+    RefMotor::new(locked(), 2),
+    RefMotor::new(locked(), 3),
+];
+static CHECKED_INCREMENTAL: [RefMotor<Locked, true, true>; 4] = [
+    RefMotor::new(locked(), 0),
+    RefMotor::new(locked(), 1),
+    RefMotor::new(locked(), 2),
+    RefMotor::new(locked(), 3),
+];
+
+type Locked = critical_section::Mutex<RefCell<State>>;
+
+const fn locked() -> Locked {
+    critical_section::Mutex::new(RefCell::new(State::new(300.0)))
+}
+
+/// 1000 ticks of four reference motors, their feedback changing every tick.
+#[inline(never)]
+fn reference_ticks<L: Lock, const C: bool, const I: bool>(
+    f: &Figures,
+    motors: &[RefMotor<L, C, I>; 4],
+    out: &mut [u32; SAMPLES],
+) {
+    let nodes: [&dyn Node; 4] = [&motors[0], &motors[1], &motors[2], &motors[3]];
+    let mut frame = [0u8; 8];
+    for k in 0..(SAMPLES as u32 + 20) {
+        let now_us = 1_000_000 + u64::from(k) * 1000;
+        for m in motors {
+            m.state()
+                .with(|s| s.set_feedback(250.0 + (k % 64) as f32, now_us - 300));
+        }
+        let t = ticks(|| reference::tick(&nodes, black_box(now_us), black_box(0.001), &mut frame));
+        if let Some(slot) = (k as usize).checked_sub(20).and_then(|i| out.get_mut(i)) {
+            *slot = f.cal.instructions(t);
+        }
+    }
+    black_box(frame);
+}
+
+#[inline(never)]
+fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
+    hprintln!("reference motors (the least this shape costs; not rc10, not tracked):");
+    let bare: [RefMotor<RefCell<State>, false, false>; 4] = [
+        RefMotor::new(RefCell::new(State::new(300.0)), 0),
+        RefMotor::new(RefCell::new(State::new(300.0)), 1),
+        RefMotor::new(RefCell::new(State::new(300.0)), 2),
+        RefMotor::new(RefCell::new(State::new(300.0)), 3),
+    ];
+    reference_ticks(f, &bare, s);
+    f.reference_row("ref_speed_4_pi_unchecked", s);
+    reference_ticks(f, &CHECKED, s);
+    f.reference_row("ref_speed_4_pi_checked", s);
+    reference_ticks(f, &CHECKED_INCREMENTAL, s);
+    f.reference_row("ref_speed_4_incremental_checked", s);
+    let nodes: [&dyn Node; 4] = [&CHECKED[0], &CHECKED[1], &CHECKED[2], &CHECKED[3]];
+    for (k, slot) in s.iter_mut().enumerate() {
+        let k = k as u32;
+        let frame = feedback(4, k);
+        let now_us = 5_000_000 + u64::from(k) * 1000;
+        *slot = f.cal.instructions(ticks(|| {
+            reference::dispatch(
+                &nodes,
+                black_box(frame.raw_id() as u16),
+                frame.data(),
+                now_us,
+            )
+        }));
+    }
+    f.reference_row("ref_dispatch_4_checked", s);
 }
 
 #[entry]
@@ -276,6 +361,8 @@ fn main() -> ! {
         *slot = f.cal.instructions(ticks(|| dt.update(black_box(now))));
     }
     f.row("delta_time", &mut s, Stat::Median);
+
+    reference_rows(&f, &mut s);
 
     debug::exit(debug::EXIT_SUCCESS);
     loop {

@@ -1,0 +1,248 @@
+//! Reference motors: the least a 1 kHz tick and a feedback frame of the design's shape can
+//! cost, to measure the benchmark goals against. Not rc10: nothing here is used by rc10-core.
+//!
+//! The shape is rc10's (SPEC's design card): the scheduler calls `update` on every motor
+//! through `&dyn`, then `pack` on every motor, over a `heapless::Vec`; the receiver hands a
+//! frame to the motor found for its ID. What each reference motor does, and no more:
+//! - speed loop: error, then a positional PI (trapezoid integral, integral limit, output
+//!   limit, integration stopped while the output saturates in the error's direction) or an
+//!   incremental one (output limit only, RC10_LIB's speed-loop form); the command rounded to
+//!   the C620's wire integer and clamped to ±16384; `pack` writes its two bytes big-endian
+//!   into a fixed 8-byte frame at a slot fixed at build;
+//! - *checked*: in addition, its state behind a critical section (the lock every motor
+//!   shared between tasks needs), offline after 100 ms without feedback (output zero), and a
+//!   non-finite output replaced by zero;
+//! - feedback: the frame's ID picks the motor from a table; under its lock, the DLC checked,
+//!   rotor angle and speed parsed, the multi-turn count advanced by the shortest way between
+//!   two angles (exact, 64-bit) and the arrival stamped.
+//!
+//! What rc10 does beyond this on the same paths (control modes, the per-term record, the
+//! statistics window, frames built from declared IDs, slots held to their node, derating,
+//! integrals held on stale feedback, frames stamped before the newest refused, turn counting
+//! through a receive stall, …) is listed in BENCHMARKS.md.
+
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicI32, Ordering};
+
+/// Offline after this long without feedback, in µs.
+const TIMEOUT_US: u64 = 100_000;
+/// C620 wire units per amp (16384 / 20 A).
+const RAW_PER_AMP: f32 = 819.2;
+
+/// A reference motor's state.
+pub struct State {
+    target_rpm: f32,
+    speed_rpm: f32,
+    last_feedback_us: u64,
+    kp: f32,
+    ki: f32,
+    integral: f32,
+    integral_limit: f32,
+    output_limit: f32,
+    previous_error: f32,
+    output_amps: f32,
+    last_angle: u16,
+    rotor_counts: i64,
+}
+
+impl State {
+    /// At rest, aiming at `target_rpm`, with the M3508 speed loop's usual gains (amps per rpm).
+    pub const fn new(target_rpm: f32) -> Self {
+        Self {
+            target_rpm,
+            speed_rpm: 0.0,
+            last_feedback_us: 0,
+            kp: 0.6,
+            ki: 8.0,
+            integral: 0.0,
+            integral_limit: 10.0,
+            output_limit: 20.0,
+            previous_error: 0.0,
+            output_amps: 0.0,
+            last_angle: 0,
+            rotor_counts: 0,
+        }
+    }
+}
+
+/// Access to a reference motor's state: behind a critical section, or not at all locked.
+pub trait Lock {
+    /// Runs `f` on the state.
+    fn with<R>(&self, f: impl FnOnce(&mut State) -> R) -> Option<R>;
+}
+
+impl Lock for critical_section::Mutex<RefCell<State>> {
+    #[inline(always)]
+    fn with<R>(&self, f: impl FnOnce(&mut State) -> R) -> Option<R> {
+        critical_section::with(|cs| Some(f(&mut *self.borrow(cs).try_borrow_mut().ok()?)))
+    }
+}
+
+impl Lock for RefCell<State> {
+    #[inline(always)]
+    fn with<R>(&self, f: impl FnOnce(&mut State) -> R) -> Option<R> {
+        Some(f(&mut *self.try_borrow_mut().ok()?))
+    }
+}
+
+/// What the scheduler and the receiver see.
+pub trait Node {
+    /// Control math.
+    fn update(&self, now_us: u64, dt_s: f32);
+    /// Writes the command into the frame.
+    fn pack(&self, frame: &mut [u8; 8]);
+    /// Takes a feedback frame's data.
+    fn on_feedback(&self, data: &[u8], now_us: u64);
+}
+
+/// A reference motor: `CHECKED` adds liveness and the NaN rule (the lock is `L`'s),
+/// `INCREMENTAL` picks the incremental PI.
+pub struct RefMotor<L, const CHECKED: bool, const INCREMENTAL: bool> {
+    state: L,
+    command_raw: AtomicI32,
+    slot: usize,
+}
+
+impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> RefMotor<L, CHECKED, INCREMENTAL> {
+    /// A motor packing into slot `slot` (0–3).
+    pub const fn new(state: L, slot: usize) -> Self {
+        Self {
+            state,
+            command_raw: AtomicI32::new(0),
+            slot,
+        }
+    }
+
+    /// Its lock (for the bench to set the state).
+    pub fn state(&self) -> &L {
+        &self.state
+    }
+}
+
+#[inline(always)]
+fn clamp(x: f32, low: f32, high: f32) -> f32 {
+    if x > high {
+        high
+    } else if x < low {
+        low
+    } else {
+        x
+    }
+}
+
+impl State {
+    /// Sets the measured speed and the arrival stamp (the bench's feedback).
+    pub fn set_feedback(&mut self, speed_rpm: f32, now_us: u64) {
+        self.speed_rpm = speed_rpm;
+        self.last_feedback_us = now_us;
+    }
+
+    #[inline(always)]
+    fn positional(&mut self, error: f32, dt_s: f32) -> f32 {
+        let held = self.integral;
+        let mut integral = clamp(
+            held + self.ki * dt_s * 0.5 * (error + self.previous_error),
+            -self.integral_limit,
+            self.integral_limit,
+        );
+        let unclamped = self.kp * error + integral;
+        let output = clamp(unclamped, -self.output_limit, self.output_limit);
+        if output != unclamped && (unclamped > 0.0) == (error > 0.0) {
+            integral = held;
+        }
+        self.integral = integral;
+        output
+    }
+
+    #[inline(always)]
+    fn incremental(&mut self, error: f32, dt_s: f32) -> f32 {
+        let step = self.kp * (error - self.previous_error) + self.ki * dt_s * error;
+        clamp(
+            self.output_amps + step,
+            -self.output_limit,
+            self.output_limit,
+        )
+    }
+}
+
+impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> Node
+    for RefMotor<L, CHECKED, INCREMENTAL>
+{
+    #[inline(never)]
+    fn update(&self, now_us: u64, dt_s: f32) {
+        let raw = self.state.with(|s| {
+            if CHECKED && now_us.wrapping_sub(s.last_feedback_us) > TIMEOUT_US {
+                s.integral = 0.0;
+                s.output_amps = 0.0;
+                return 0;
+            }
+            let error = s.target_rpm - s.speed_rpm;
+            let mut output = if INCREMENTAL {
+                s.incremental(error, dt_s)
+            } else {
+                s.positional(error, dt_s)
+            };
+            if CHECKED && !output.is_finite() {
+                output = 0.0;
+            }
+            s.previous_error = error;
+            s.output_amps = output;
+            let rounded = output * RAW_PER_AMP + if output >= 0.0 { 0.5 } else { -0.5 };
+            (rounded as i32).clamp(-16384, 16384)
+        });
+        self.command_raw.store(raw.unwrap_or(0), Ordering::Relaxed);
+    }
+
+    #[inline(never)]
+    fn pack(&self, frame: &mut [u8; 8]) {
+        let raw = self.command_raw.load(Ordering::Relaxed) as i16;
+        let at = self.slot.wrapping_mul(2);
+        if let Some(bytes) = frame.get_mut(at..at.wrapping_add(2)) {
+            bytes.copy_from_slice(&raw.to_be_bytes());
+        }
+    }
+
+    #[inline(never)]
+    fn on_feedback(&self, data: &[u8], now_us: u64) {
+        let &[a0, a1, r0, r1, ..] = data else {
+            return;
+        };
+        if data.len() != 8 {
+            return;
+        }
+        let angle = u16::from_be_bytes([a0, a1]) & 0x1FFF;
+        let rotor_rpm = i16::from_be_bytes([r0, r1]);
+        self.state.with(|s| {
+            // The shortest way between two angles of 8192 counts: -4096..4095.
+            let step = (i32::from(angle) - i32::from(s.last_angle) + 4096).rem_euclid(8192) - 4096;
+            s.rotor_counts = s.rotor_counts.wrapping_add(i64::from(step));
+            s.last_angle = angle;
+            s.speed_rpm = f32::from(rotor_rpm) * (187.0 / 3591.0);
+            s.last_feedback_us = now_us;
+        });
+    }
+}
+
+/// One tick of reference motors: every `update`, then every `pack` into one frame.
+#[inline(never)]
+pub fn tick(nodes: &[&dyn Node], now_us: u64, dt_s: f32, frame: &mut [u8; 8]) {
+    for node in nodes {
+        node.update(now_us, dt_s);
+    }
+    let mut out = [0u8; 8];
+    for node in nodes {
+        node.pack(&mut out);
+    }
+    *frame = out;
+}
+
+/// One feedback frame to the reference motor its ID (0x201–0x204) picks.
+#[inline(never)]
+pub fn dispatch(nodes: &[&dyn Node; 4], id: u16, data: &[u8], now_us: u64) {
+    if let Some(node) = usize::from(id)
+        .checked_sub(0x201)
+        .and_then(|index| nodes.get(index))
+    {
+        node.on_feedback(data, now_us);
+    }
+}
