@@ -14,7 +14,11 @@
 //!   non-finite output replaced by zero;
 //! - feedback: the frame's ID picks the motor from a table; under its lock, the DLC checked,
 //!   rotor angle and speed parsed, the multi-turn count advanced by the shortest way between
-//!   two angles (exact, 64-bit) and the arrival stamped.
+//!   two angles (exact, 64-bit) and the arrival stamped;
+//! - PID steps ([`RefPid`]): a non-finite input gives 0 and leaves the state alone; the
+//!   positional step with the speed PI's integral and limits plus a derivative on the
+//!   measurement, the incremental one RC10_LIB's form with an output limit; the output
+//!   returned as one `f32`.
 //!
 //! What rc10 does beyond this on the same paths (control modes, the per-term record, the
 //! statistics window, frames built from declared IDs, slots held to their node, derating,
@@ -244,5 +248,80 @@ pub fn dispatch(nodes: &[&dyn Node; 4], id: u16, data: &[u8], now_us: u64) {
         .and_then(|index| nodes.get(index))
     {
         node.on_feedback(data, now_us);
+    }
+}
+
+/// A reference PID's state and gains (gains per second: `ki` × s, `kd` ÷ s).
+pub struct RefPid {
+    kp: f32,
+    ki: f32,
+    kd: f32,
+    integral_limit: f32,
+    output_limit: f32,
+    integral: f32,
+    previous_error: f32,
+    second_error: f32,
+    previous_measurement: f32,
+    output: f32,
+}
+
+impl RefPid {
+    /// A controller with these gains and limits.
+    pub const fn new(kp: f32, ki: f32, kd: f32, integral_limit: f32, output_limit: f32) -> Self {
+        Self {
+            kp,
+            ki,
+            kd,
+            integral_limit,
+            output_limit,
+            integral: 0.0,
+            previous_error: 0.0,
+            second_error: 0.0,
+            previous_measurement: 0.0,
+            output: 0.0,
+        }
+    }
+
+    /// One positional step: P, trapezoid I within its limit, D on the measurement, the output
+    /// limit, integration stopped while the output saturates in the error's direction.
+    #[inline(never)]
+    pub fn positional(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
+        if !(target.is_finite() && measurement.is_finite()) {
+            return 0.0;
+        }
+        let error = target - measurement;
+        let held = self.integral;
+        let mut integral = clamp(
+            held + self.ki * dt_s * 0.5 * (error + self.previous_error),
+            -self.integral_limit,
+            self.integral_limit,
+        );
+        let derivative = -self.kd * (measurement - self.previous_measurement) / dt_s;
+        let unclamped = self.kp * error + integral + derivative;
+        let output = clamp(unclamped, -self.output_limit, self.output_limit);
+        if output != unclamped && (unclamped > 0.0) == (error > 0.0) {
+            integral = held;
+        }
+        self.integral = integral;
+        self.previous_error = error;
+        self.previous_measurement = measurement;
+        output
+    }
+
+    /// One incremental step: the output moved by P on the error's change, I on the error and
+    /// D on its second difference, within the output limit.
+    #[inline(never)]
+    pub fn incremental(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
+        if !(target.is_finite() && measurement.is_finite()) {
+            return 0.0;
+        }
+        let error = target - measurement;
+        let step = self.kp * (error - self.previous_error)
+            + self.ki * dt_s * error
+            + self.kd * (error - 2.0 * self.previous_error + self.second_error) / dt_s;
+        self.output = clamp(self.output + step, -self.output_limit, self.output_limit);
+        self.second_error = self.previous_error;
+        self.previous_error = error;
+        self.output
     }
 }

@@ -16,7 +16,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
-use rc10_bench_m4::reference::{self, Lock, Node, RefMotor, State};
+use rc10_bench_m4::reference::{self, Lock, Node, RefMotor, RefPid, State};
 use rc10_bench_m4::{Calibration, min_median_max, ticks, timer_start};
 use rc10_core::bus::{Bus, BusBuilder};
 use rc10_core::can::CanFrame;
@@ -224,6 +224,24 @@ fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
         }));
     }
     f.reference_row("ref_dispatch_4_checked", s);
+    // The PID rows' gains and inputs (kp 0.6, ki 8, kd 0.001; limits 10 and 20; incremental
+    // kp 18, ki 15, limit 15).
+    let mut positional = RefPid::new(0.6, 8.0, 0.001, 10.0, 20.0);
+    let mut incremental = RefPid::new(18.0, 15.0, 0.0, 0.0, 15.0);
+    for (i, slot) in s.iter_mut().enumerate() {
+        let m = (i % 97) as f32;
+        *slot = f.cal.instructions(ticks(|| {
+            positional.positional(black_box(300.0), m, black_box(0.001))
+        }));
+    }
+    f.reference_row("ref_pid_positional", s);
+    for (i, slot) in s.iter_mut().enumerate() {
+        let m = (i % 97) as f32;
+        *slot = f.cal.instructions(ticks(|| {
+            incremental.incremental(black_box(300.0), m, black_box(0.001))
+        }));
+    }
+    f.reference_row("ref_pid_incremental", s);
 }
 
 #[entry]
