@@ -1,24 +1,28 @@
 //! Reference motors: the least a 1 kHz tick and a feedback frame of the design's shape can
 //! cost, to measure the benchmark goals against. Not rc10: nothing here is used by rc10-core.
 //!
-//! The shape is rc10's (SPEC's design card): the scheduler calls `update` on every motor
-//! through `&dyn`, then `pack` on every motor, over a `heapless::Vec`; the receiver hands a
-//! frame to the motor found for its ID. What each reference motor does, and no more:
+//! One plain implementation, written to be lean, not a proven minimum. The shape is rc10's
+//! (SPEC's design card): the scheduler calls `update` on every motor through `&dyn`, then
+//! `pack` on every motor, over a list whose length is known only at run time (the bench
+//! passes a `heapless::Vec`); the receiver hands a frame to the motor a table finds for its
+//! ID. What each reference motor does, and no more:
 //! - speed loop: error, then a positional PI (trapezoid integral, integral limit, output
 //!   limit, integration stopped while the output saturates in the error's direction) or an
-//!   incremental one (output limit only, RC10_LIB's speed-loop form); the command rounded to
+//!   incremental one (RC10_LIB's speed-loop form, with gains per second, no deadband and an
+//!   output limit only); the command rounded to
 //!   the C620's wire integer and clamped to ±16384; `pack` writes its two bytes big-endian
 //!   into a fixed 8-byte frame at a slot fixed at build;
 //! - *checked*: in addition, its state behind a critical section (the lock every motor
-//!   shared between tasks needs), offline after 100 ms without feedback (output zero), and a
-//!   non-finite output replaced by zero;
+//!   shared between tasks needs), offline after 100 ms without feedback (output zero and the
+//!   integral cleared), and a non-finite output replaced by zero with the controller's state
+//!   left as it was;
 //! - feedback: the frame's ID picks the motor from a table; under its lock, the DLC checked,
-//!   rotor angle and speed parsed, the multi-turn count advanced by the shortest way between
-//!   two angles (exact, 64-bit) and the arrival stamped;
-//! - PID steps ([`RefPid`]): a non-finite input gives 0 and leaves the state alone; the
-//!   positional step with the speed PI's integral and limits plus a derivative on the
-//!   measurement, the incremental one RC10_LIB's form with an output limit; the output
-//!   returned as one `f32`.
+//!   rotor angle, speed, torque current and temperature parsed, the multi-turn count advanced
+//!   by the shortest way between two angles (exact, 64-bit) and the arrival stamped;
+//! - PID steps ([`RefPid`]): a non-finite target or measurement gives 0 and leaves the state
+//!   alone; the positional step with the speed PI's integral and limits plus a derivative on
+//!   the measurement, the incremental one in RC10_LIB's form (gains per second) with an
+//!   output limit, its D term skipped when kd is 0; the output returned as one `f32`.
 //!
 //! What rc10 does beyond this on the same paths (control modes, the per-term record, the
 //! statistics window, frames built from declared IDs, slots held to their node, derating,
@@ -27,6 +31,7 @@
 
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicI32, Ordering};
+use rc10_core::can::CanFrame;
 
 /// Offline after this long without feedback, in µs.
 const TIMEOUT_US: u64 = 100_000;
@@ -47,6 +52,8 @@ pub struct State {
     output_amps: f32,
     last_angle: u16,
     rotor_counts: i64,
+    current_raw: i16,
+    temperature_c: u8,
 }
 
 impl State {
@@ -65,11 +72,13 @@ impl State {
             output_amps: 0.0,
             last_angle: 0,
             rotor_counts: 0,
+            current_raw: 0,
+            temperature_c: 0,
         }
     }
 }
 
-/// Access to a reference motor's state: behind a critical section, or not at all locked.
+/// Access to a reference motor's state: behind a critical section, or only a `RefCell`.
 pub trait Lock {
     /// Runs `f` on the state.
     fn with<R>(&self, f: impl FnOnce(&mut State) -> R) -> Option<R>;
@@ -141,8 +150,10 @@ impl State {
         self.last_feedback_us = now_us;
     }
 
+    /// The output and the integral to keep (not stored: the caller keeps them only when the
+    /// output is finite).
     #[inline(always)]
-    fn positional(&mut self, error: f32, dt_s: f32) -> f32 {
+    fn positional(&self, error: f32, dt_s: f32) -> (f32, f32) {
         let held = self.integral;
         let mut integral = clamp(
             held + self.ki * dt_s * 0.5 * (error + self.previous_error),
@@ -154,12 +165,11 @@ impl State {
         if output != unclamped && (unclamped > 0.0) == (error > 0.0) {
             integral = held;
         }
-        self.integral = integral;
-        output
+        (output, integral)
     }
 
     #[inline(always)]
-    fn incremental(&mut self, error: f32, dt_s: f32) -> f32 {
+    fn incremental(&self, error: f32, dt_s: f32) -> f32 {
         let step = self.kp * (error - self.previous_error) + self.ki * dt_s * error;
         clamp(
             self.output_amps + step,
@@ -181,14 +191,16 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> Node
                 return 0;
             }
             let error = s.target_rpm - s.speed_rpm;
-            let mut output = if INCREMENTAL {
-                s.incremental(error, dt_s)
+            let (output, integral) = if INCREMENTAL {
+                (s.incremental(error, dt_s), s.integral)
             } else {
                 s.positional(error, dt_s)
             };
             if CHECKED && !output.is_finite() {
-                output = 0.0;
+                // The state as it was; the command zero.
+                return 0;
             }
+            s.integral = integral;
             s.previous_error = error;
             s.output_amps = output;
             let rounded = output * RAW_PER_AMP + if output >= 0.0 { 0.5 } else { -0.5 };
@@ -208,12 +220,9 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> Node
 
     #[inline(never)]
     fn on_feedback(&self, data: &[u8], now_us: u64) {
-        let &[a0, a1, r0, r1, ..] = data else {
+        let &[a0, a1, r0, r1, c0, c1, temperature_c, _] = data else {
             return;
         };
-        if data.len() != 8 {
-            return;
-        }
         let angle = u16::from_be_bytes([a0, a1]) & 0x1FFF;
         let rotor_rpm = i16::from_be_bytes([r0, r1]);
         self.state.with(|s| {
@@ -222,6 +231,8 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> Node
             s.rotor_counts = s.rotor_counts.wrapping_add(i64::from(step));
             s.last_angle = angle;
             s.speed_rpm = f32::from(rotor_rpm) * (187.0 / 3591.0);
+            s.current_raw = i16::from_be_bytes([c0, c1]);
+            s.temperature_c = temperature_c;
             s.last_feedback_us = now_us;
         });
     }
@@ -240,14 +251,19 @@ pub fn tick(nodes: &[&dyn Node], now_us: u64, dt_s: f32, frame: &mut [u8; 8]) {
     *frame = out;
 }
 
-/// One feedback frame to the reference motor its ID (0x201–0x204) picks.
+/// One feedback frame to the reference motor its ID (0x201–0x204) picks; remote and
+/// extended frames are nobody's.
 #[inline(never)]
-pub fn dispatch(nodes: &[&dyn Node; 4], id: u16, data: &[u8], now_us: u64) {
-    if let Some(node) = usize::from(id)
-        .checked_sub(0x201)
+pub fn dispatch(nodes: &[&dyn Node; 4], frame: &CanFrame, now_us: u64) {
+    if frame.is_extended() || frame.is_remote() {
+        return;
+    }
+    if let Some(node) = usize::try_from(frame.raw_id())
+        .ok()
+        .and_then(|id| id.checked_sub(0x201))
         .and_then(|index| nodes.get(index))
     {
-        node.on_feedback(data, now_us);
+        node.on_feedback(frame.data(), now_us);
     }
 }
 
@@ -316,9 +332,10 @@ impl RefPid {
             return 0.0;
         }
         let error = target - measurement;
-        let step = self.kp * (error - self.previous_error)
-            + self.ki * dt_s * error
-            + self.kd * (error - 2.0 * self.previous_error + self.second_error) / dt_s;
+        let mut step = self.kp * (error - self.previous_error) + self.ki * dt_s * error;
+        if self.kd != 0.0 {
+            step += self.kd * (error - 2.0 * self.previous_error + self.second_error) / dt_s;
+        }
         self.output = clamp(self.output + step, -self.output_limit, self.output_limit);
         self.second_error = self.previous_error;
         self.previous_error = error;

@@ -5,9 +5,9 @@
 //! Scenarios: DJI M3508s (1, 4, and 8 on two buses) in speed and in angle mode with feedback
 //! that changes every tick (one `Bus::tick` each: update + pack, send excluded); one feedback
 //! frame routed and parsed among 4 motors at start and after 10⁶ frames at full speed; one
-//! step of each PID kind; one `DeltaTime` update. Then the same tick and frame for the
-//! reference motors of `rc10_bench_m4::reference` (the least this shape costs), printed
-//! for comparison and not tracked.
+//! step of each PID kind; one `DeltaTime` update. Then the 4-motor speed tick, the frame and
+//! the two PID steps of `rc10_bench_m4::reference` (a minimal implementation of the same
+//! shape), printed for comparison and not tracked.
 #![no_std]
 #![no_main]
 
@@ -90,8 +90,17 @@ impl Figures {
 
     /// A row of the reference motors: printed, not tracked.
     fn reference_row(&self, name: &str, samples: &mut [u32]) {
+        let n = samples.len().max(1) as u64;
+        let mean = (samples.iter().map(|s| u64::from(*s)).sum::<u64>() / n) as u32;
         let (min, median, max) = min_median_max(samples);
-        hprintln!("{:<34} {:>7} {:>7} {:>7}", name, min, median, max);
+        hprintln!(
+            "{:<34} {:>7} {:>7} {:>7} {:>7}",
+            name,
+            min,
+            median,
+            max,
+            mean
+        );
     }
 }
 
@@ -178,7 +187,11 @@ fn reference_ticks<L: Lock, const C: bool, const I: bool>(
     motors: &[RefMotor<L, C, I>; 4],
     out: &mut [u32; SAMPLES],
 ) {
-    let nodes: [&dyn Node; 4] = [&motors[0], &motors[1], &motors[2], &motors[3]];
+    // A list whose length only the run knows, as a bus's is.
+    let mut nodes: heapless::Vec<&dyn Node, 8> = heapless::Vec::new();
+    for m in motors {
+        let _ = nodes.push(m);
+    }
     let mut frame = [0u8; 8];
     for k in 0..(SAMPLES as u32 + 20) {
         let now_us = 1_000_000 + u64::from(k) * 1000;
@@ -186,7 +199,14 @@ fn reference_ticks<L: Lock, const C: bool, const I: bool>(
             m.state()
                 .with(|s| s.set_feedback(250.0 + (k % 64) as f32, now_us - 300));
         }
-        let t = ticks(|| reference::tick(&nodes, black_box(now_us), black_box(0.001), &mut frame));
+        let t = ticks(|| {
+            reference::tick(
+                black_box(&nodes[..]),
+                black_box(now_us),
+                black_box(0.001),
+                &mut frame,
+            )
+        });
         if let Some(slot) = (k as usize).checked_sub(20).and_then(|i| out.get_mut(i)) {
             *slot = f.cal.instructions(t);
         }
@@ -196,7 +216,7 @@ fn reference_ticks<L: Lock, const C: bool, const I: bool>(
 
 #[inline(never)]
 fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
-    hprintln!("reference motors (the least this shape costs; not rc10, not tracked):");
+    hprintln!("reference motors (a minimal implementation of the shape; not rc10, not tracked):");
     let bare: [RefMotor<RefCell<State>, false, false>; 4] = [
         RefMotor::new(RefCell::new(State::new(300.0)), 0),
         RefMotor::new(RefCell::new(State::new(300.0)), 1),
@@ -215,12 +235,7 @@ fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
         let frame = feedback(4, k);
         let now_us = 5_000_000 + u64::from(k) * 1000;
         *slot = f.cal.instructions(ticks(|| {
-            reference::dispatch(
-                &nodes,
-                black_box(frame.raw_id() as u16),
-                frame.data(),
-                now_us,
-            )
+            reference::dispatch(&nodes, black_box(&frame), now_us)
         }));
     }
     f.reference_row("ref_dispatch_4_checked", s);
