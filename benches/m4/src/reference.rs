@@ -19,6 +19,8 @@
 //! - feedback: the frame's ID picks the motor from a table; under its lock, the DLC checked,
 //!   rotor angle, speed, torque current and temperature parsed, the multi-turn count advanced
 //!   by the shortest way between two angles (exact, 64-bit) and the arrival stamped;
+//! - angle mode: every 10th tick, the output's multi-turn angle from the turn count and a
+//!   positional angle step ([`RefPid::positional`]) give the speed loop's target;
 //! - PID steps ([`RefPid`]): a non-finite target or measurement gives 0 and leaves the state
 //!   alone; the positional step with the speed PI's integral and limits plus a derivative on
 //!   the measurement, the incremental one in RC10_LIB's form (gains per second) with an
@@ -54,7 +56,13 @@ pub struct State {
     rotor_counts: i64,
     current_raw: i16,
     temperature_c: u8,
+    angle_target_deg: f32,
+    angle_loop: RefPid,
+    ticks_to_angle_loop: u8,
 }
+
+/// Output degrees per rotor count of an M3508 (360° per 8192 counts, 3591/187 reduction).
+const DEG_PER_COUNT: f32 = 360.0 * 187.0 / (8192.0 * 3591.0);
 
 impl State {
     /// At rest, aiming at `target_rpm`, with the M3508 speed loop's usual gains (amps per rpm).
@@ -74,6 +82,10 @@ impl State {
             rotor_counts: 0,
             current_raw: 0,
             temperature_c: 0,
+            angle_target_deg: 90.0,
+            // rc10's M3508 angle loop: 8 output rpm per degree, at most 400 rpm.
+            angle_loop: RefPid::new(8.0, 0.0, 0.0, 0.0, 400.0),
+            ticks_to_angle_loop: 0,
         }
     }
 }
@@ -109,14 +121,17 @@ pub trait Node {
 }
 
 /// A reference motor: `CHECKED` adds liveness and the NaN rule (the lock is `L`'s),
-/// `INCREMENTAL` picks the incremental PI.
-pub struct RefMotor<L, const CHECKED: bool, const INCREMENTAL: bool> {
+/// `INCREMENTAL` picks the incremental PI, `ANGLE` runs a positional angle loop on the
+/// output's multi-turn angle every 10th tick, its output the speed loop's target.
+pub struct RefMotor<L, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool = false> {
     state: L,
     command_raw: AtomicI32,
     slot: usize,
 }
 
-impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> RefMotor<L, CHECKED, INCREMENTAL> {
+impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool>
+    RefMotor<L, CHECKED, INCREMENTAL, ANGLE>
+{
     /// A motor packing into slot `slot` (0–3).
     pub const fn new(state: L, slot: usize) -> Self {
         Self {
@@ -179,8 +194,8 @@ impl State {
     }
 }
 
-impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> Node
-    for RefMotor<L, CHECKED, INCREMENTAL>
+impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool> Node
+    for RefMotor<L, CHECKED, INCREMENTAL, ANGLE>
 {
     #[inline(never)]
     fn update(&self, now_us: u64, dt_s: f32) {
@@ -189,6 +204,22 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool> Node
                 s.integral = 0.0;
                 s.output_amps = 0.0;
                 return 0;
+            }
+            if ANGLE {
+                if s.ticks_to_angle_loop == 0 {
+                    s.ticks_to_angle_loop = 9;
+                    // 32-bit while the count fits (about 14,000 output turns), exact beyond.
+                    let counts = match i32::try_from(s.rotor_counts) {
+                        Ok(c) => c as f32,
+                        Err(_) => s.rotor_counts as f32,
+                    };
+                    let target = s.angle_target_deg;
+                    s.target_rpm = s
+                        .angle_loop
+                        .positional(target, counts * DEG_PER_COUNT, 0.01);
+                } else {
+                    s.ticks_to_angle_loop -= 1;
+                }
             }
             let error = s.target_rpm - s.speed_rpm;
             let (output, integral) = if INCREMENTAL {
@@ -298,8 +329,9 @@ impl RefPid {
         }
     }
 
-    /// One positional step: P, trapezoid I within its limit, D on the measurement, the output
-    /// limit, integration stopped while the output saturates in the error's direction.
+    /// One positional step: P, trapezoid I within its limit (skipped when ki is 0), D on the
+    /// measurement (skipped when kd is 0), the output limit, integration stopped while the output saturates in the
+    /// error's direction.
     #[inline(never)]
     pub fn positional(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
         if !(target.is_finite() && measurement.is_finite()) {
@@ -307,13 +339,18 @@ impl RefPid {
         }
         let error = target - measurement;
         let held = self.integral;
-        let mut integral = clamp(
-            held + self.ki * dt_s * 0.5 * (error + self.previous_error),
-            -self.integral_limit,
-            self.integral_limit,
-        );
-        let derivative = -self.kd * (measurement - self.previous_measurement) / dt_s;
-        let unclamped = self.kp * error + integral + derivative;
+        let mut integral = held;
+        if self.ki != 0.0 {
+            integral = clamp(
+                held + self.ki * dt_s * 0.5 * (error + self.previous_error),
+                -self.integral_limit,
+                self.integral_limit,
+            );
+        }
+        let mut unclamped = self.kp * error + integral;
+        if self.kd != 0.0 {
+            unclamped -= self.kd * (measurement - self.previous_measurement) / dt_s;
+        }
         let output = clamp(unclamped, -self.output_limit, self.output_limit);
         if output != unclamped && (unclamped > 0.0) == (error > 0.0) {
             integral = held;

@@ -174,6 +174,13 @@ static CHECKED_INCREMENTAL: [RefMotor<Locked, true, true>; 4] = [
     RefMotor::new(locked(), 3),
 ];
 
+static CHECKED_ANGLE: [RefMotor<Locked, true, false, true>; 4] = [
+    RefMotor::new(locked(), 0),
+    RefMotor::new(locked(), 1),
+    RefMotor::new(locked(), 2),
+    RefMotor::new(locked(), 3),
+];
+
 type Locked = critical_section::Mutex<RefCell<State>>;
 
 const fn locked() -> Locked {
@@ -182,9 +189,9 @@ const fn locked() -> Locked {
 
 /// 1000 ticks of four reference motors, their feedback changing every tick.
 #[inline(never)]
-fn reference_ticks<L: Lock, const C: bool, const I: bool>(
+fn reference_ticks<L: Lock, const C: bool, const I: bool, const A: bool>(
     f: &Figures,
-    motors: &[RefMotor<L, C, I>; 4],
+    motors: &[RefMotor<L, C, I, A>; 4],
     out: &mut [u32; SAMPLES],
 ) {
     // A list whose length only the run knows, as a bus's is.
@@ -229,6 +236,8 @@ fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
     f.reference_row("ref_speed_4_pi_checked", s);
     reference_ticks(f, &CHECKED_INCREMENTAL, s);
     f.reference_row("ref_speed_4_incremental_checked", s);
+    reference_ticks(f, &CHECKED_ANGLE, s);
+    f.reference_row("ref_angle_4_pi_checked", s);
     let nodes: [&dyn Node; 4] = [&CHECKED[0], &CHECKED[1], &CHECKED[2], &CHECKED[3]];
     for (k, slot) in s.iter_mut().enumerate() {
         let k = k as u32;
