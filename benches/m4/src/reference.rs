@@ -23,8 +23,9 @@
 //!   positional angle step ([`RefPid::positional`]) give the speed loop's target;
 //! - PID steps ([`RefPid`]): a non-finite target or measurement gives 0 and leaves the state
 //!   alone; the positional step with the speed PI's integral and limits plus a derivative on
-//!   the measurement, the incremental one in RC10_LIB's form (gains per second) with an
-//!   output limit, its D term skipped when kd is 0; the output returned as one `f32`.
+//!   the measurement, I and D skipped when their gain is 0; the incremental one in RC10_LIB's
+//!   form (gains per second) with an output limit, its D term skipped when kd is 0; the
+//!   output returned as one `f32`.
 //!
 //! What rc10 does beyond this on the same paths (control modes, the per-term record, the
 //! statistics window, frames built from declared IDs, slots held to their node, derating,
@@ -160,8 +161,9 @@ fn clamp(x: f32, low: f32, high: f32) -> f32 {
 
 impl State {
     /// Sets the measured speed and the arrival stamp (the bench's feedback).
-    pub fn set_feedback(&mut self, speed_rpm: f32, now_us: u64) {
+    pub fn set_feedback(&mut self, speed_rpm: f32, rotor_counts: i64, now_us: u64) {
         self.speed_rpm = speed_rpm;
+        self.rotor_counts = rotor_counts;
         self.last_feedback_us = now_us;
     }
 
@@ -208,10 +210,11 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool> N
             if ANGLE {
                 if s.ticks_to_angle_loop == 0 {
                     s.ticks_to_angle_loop = 9;
-                    // 32-bit while the count fits (about 14,000 output turns), exact beyond.
+                    // The 32-bit conversion while the count fits (about 14,000 output turns),
+                    // the 64-bit one (a library call) only beyond.
                     let counts = match i32::try_from(s.rotor_counts) {
                         Ok(c) => c as f32,
-                        Err(_) => s.rotor_counts as f32,
+                        Err(_) => wide_counts_to_f32(s.rotor_counts),
                     };
                     let target = s.angle_target_deg;
                     s.target_rpm = s
@@ -267,6 +270,14 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool> N
             s.last_feedback_us = now_us;
         });
     }
+}
+
+/// A turn count beyond 32 bits as `f32` (a library call on the M4): behind its own cold call,
+/// so that the optimiser does not compute it on every angle tick and select.
+#[cold]
+#[inline(never)]
+fn wide_counts_to_f32(counts: i64) -> f32 {
+    counts as f32
 }
 
 /// One tick of reference motors: every `update`, then every `pack` into one frame.
@@ -330,8 +341,8 @@ impl RefPid {
     }
 
     /// One positional step: P, trapezoid I within its limit (skipped when ki is 0), D on the
-    /// measurement (skipped when kd is 0), the output limit, integration stopped while the output saturates in the
-    /// error's direction.
+    /// measurement (skipped when kd is 0), the output limit, integration stopped while the
+    /// output saturates in the error's direction.
     #[inline(never)]
     pub fn positional(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
         if !(target.is_finite() && measurement.is_finite()) {

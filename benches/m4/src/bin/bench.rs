@@ -5,9 +5,9 @@
 //! Scenarios: DJI M3508s (1, 4, and 8 on two buses) in speed and in angle mode with feedback
 //! that changes every tick (one `Bus::tick` each: update + pack, send excluded); one feedback
 //! frame routed and parsed among 4 motors at start and after 10⁶ frames at full speed; one
-//! step of each PID kind; one `DeltaTime` update. Then the 4-motor speed tick, the frame and
-//! the two PID steps of `rc10_bench_m4::reference` (a minimal implementation of the same
-//! shape), printed for comparison and not tracked.
+//! step of each PID kind; one `DeltaTime` update. Then the 4-motor speed and angle ticks, the
+//! frame and the two PID steps of `rc10_bench_m4::reference` (a minimal implementation of
+//! the same shape), printed for comparison and not tracked.
 #![no_std]
 #![no_main]
 
@@ -187,7 +187,8 @@ const fn locked() -> Locked {
     critical_section::Mutex::new(RefCell::new(State::new(300.0)))
 }
 
-/// 1000 ticks of four reference motors, their feedback changing every tick.
+/// 1000 ticks of four reference motors, their speed and angle changing every tick (the
+/// output angle sweeps 0–115°, across the 90° target of the angle references).
 #[inline(never)]
 fn reference_ticks<L: Lock, const C: bool, const I: bool, const A: bool>(
     f: &Figures,
@@ -203,8 +204,13 @@ fn reference_ticks<L: Lock, const C: bool, const I: bool, const A: bool>(
     for k in 0..(SAMPLES as u32 + 20) {
         let now_us = 1_000_000 + u64::from(k) * 1000;
         for m in motors {
-            m.state()
-                .with(|s| s.set_feedback(250.0 + (k % 64) as f32, now_us - 300));
+            m.state().with(|s| {
+                s.set_feedback(
+                    250.0 + (k % 64) as f32,
+                    i64::from(k * 37 % 50_000),
+                    now_us - 300,
+                )
+            });
         }
         let t = ticks(|| {
             reference::tick(
