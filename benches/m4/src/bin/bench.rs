@@ -68,18 +68,9 @@ struct Figures {
 }
 
 impl Figures {
+    /// Prints a row (min / median / max / mean) and its tracked `figure` line.
     fn row(&self, name: &str, samples: &mut [u32], figure: Stat) {
-        let n = samples.len().max(1) as u64;
-        let mean = (samples.iter().map(|s| u64::from(*s)).sum::<u64>() / n) as u32;
-        let (min, median, max) = min_median_max(samples);
-        hprintln!(
-            "{:<34} {:>7} {:>7} {:>7} {:>7}",
-            name,
-            min,
-            median,
-            max,
-            mean
-        );
+        let (_, median, max, mean) = print_row(name, samples);
         let value = match figure {
             Stat::Median => median,
             Stat::Max => max,
@@ -90,18 +81,24 @@ impl Figures {
 
     /// A row of the reference motors: printed, not tracked.
     fn reference_row(&self, name: &str, samples: &mut [u32]) {
-        let n = samples.len().max(1) as u64;
-        let mean = (samples.iter().map(|s| u64::from(*s)).sum::<u64>() / n) as u32;
-        let (min, median, max) = min_median_max(samples);
-        hprintln!(
-            "{:<34} {:>7} {:>7} {:>7} {:>7}",
-            name,
-            min,
-            median,
-            max,
-            mean
-        );
+        print_row(name, samples);
     }
+}
+
+/// Prints a table row of `samples` (sorted in place); returns min, median, max and mean.
+fn print_row(name: &str, samples: &mut [u32]) -> (u32, u32, u32, u32) {
+    let n = samples.len().max(1) as u64;
+    let mean = (samples.iter().map(|s| u64::from(*s)).sum::<u64>() / n) as u32;
+    let (min, median, max) = min_median_max(samples);
+    hprintln!(
+        "{:<34} {:>7} {:>7} {:>7} {:>7}",
+        name,
+        min,
+        median,
+        max,
+        mean
+    );
+    (min, median, max, mean)
 }
 
 #[derive(Clone, Copy)]
