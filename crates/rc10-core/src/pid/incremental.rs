@@ -1,7 +1,7 @@
 //! Incremental (velocity-form) PID with an optional tracking differentiator on the target:
 //! RC10_LIB's speed-loop controller.
 
-use super::positional::{all_finite, below, clamp_abs, dt_valid};
+use super::positional::{all_finite, cap, clamp_abs, dt_valid};
 use super::{
     ErrorMode, PidConfigError, PidTerms, TrackingDifferentiator, check_deadband, check_gains,
     check_limit,
@@ -132,6 +132,9 @@ pub struct IncrementalPid {
     /// The deadband as one comparison: a step runs when `|e| > band`; −1 for no band
     /// (deadband 0), so an error of exactly 0 runs too.
     band: f32,
+    /// The output limit capped at `f32::MAX` (no limit, infinity, becomes the largest
+    /// finite value), so that clamping to it keeps every output finite.
+    limit: f32,
     td: Option<TrackingDifferentiator>,
     output: f32,
     /// The last error outside the deadband, and `kd·ė` then (with the present `kd`, within
@@ -164,6 +167,7 @@ impl IncrementalPid {
         Ok(Self {
             config,
             band: band_of(config.deadband),
+            limit: cap(config.output_limit),
             td,
             output: 0.0,
             history: None,
@@ -199,10 +203,11 @@ impl IncrementalPid {
                 // kd = 0 the kept part is 0 and stays 0: 0 · ∞ is NaN, which `finite` makes 0.)
                 *d_part = finite(*d_part * (config.kd / self.config.kd));
             }
-            *d_part = clamp_abs(*d_part, below(config.output_limit, f32::MAX));
+            *d_part = clamp_abs(*d_part, fresh.limit);
         }
         self.config = config;
         self.band = fresh.band;
+        self.limit = fresh.limit;
         self.output = saturate(self.output, config.output_limit);
         Ok(())
     }
@@ -245,19 +250,31 @@ impl IncrementalPid {
             return self.last;
         }
         let (e1, d_before) = self.history.unwrap_or((e, 0.0));
-        let since_s = self.since_s + dt_s;
-        let limit = below(c.output_limit, f32::MAX);
-        // kd = 0 (the usual speed loop): no divide.
-        let d_now = if c.kd == 0.0 {
-            0.0
+        let limit = self.limit;
+        // kd = 0 (the usual speed loop): no divide, and no D at all (the kept part is 0
+        // whenever kd is: `set_config` scales it by the gain's ratio).
+        let (d_now, d) = if c.kd == 0.0 {
+            (0.0, -d_before)
         } else {
-            clamp_abs(finite(c.kd * (e - e1) / since_s), limit)
+            let since_s = self.since_s + dt_s;
+            let d_now = clamp_abs(finite(c.kd * (e - e1) / since_s), limit);
+            (d_now, d_now - d_before)
         };
-        let p = finite(c.kp * (e - e1));
-        let i = finite(c.ki * e * dt_s);
-        let d = finite(d_now - d_before);
-        // Finite terms: the sum is finite or ±inf, never NaN, and the capped limit is finite.
-        self.output = clamp_abs(self.output + p + i + d, limit);
+        let (mut p, mut i) = (c.kp * (e - e1), c.ki * e * dt_s);
+        let mut sum = self.output + p + i + d;
+        let d = if sum.is_finite() {
+            // Then so is every term (an infinite or NaN one makes the sum infinite or NaN):
+            // each is its own `finite` value, checked once for all.
+            d
+        } else {
+            // Each term held finite, then summed again: finite or ±inf, never NaN.
+            (p, i) = (finite(p), finite(i));
+            let d = finite(d);
+            sum = self.output + p + i + d;
+            d
+        };
+        // The capped limit is finite.
+        self.output = clamp_abs(sum, limit);
         self.history = Some((e, d_now));
         self.since_s = 0.0;
         self.last = PidTerms {
@@ -479,6 +496,26 @@ mod tests {
         assert!((c.update(1.0, 0.0, DT).output - 1.0).abs() < 1e-4);
         assert_eq!(c.update(1.5, 0.0, 1e-30).output, 10.0);
         assert!((c.update(2.0, 0.0, DT).output - 0.5).abs() < 1e-4);
+    }
+
+    #[test]
+    fn an_overflowing_term_is_held_at_the_largest_float_before_the_sum() {
+        // No limit, kp 1e30: errors 0, then 1e10 (P = 1e40, past f32::MAX ≈ 3.4e38), then
+        // −1e10 (P = −2e40). Each P is held at ±f32::MAX before it is added: the output goes
+        // to f32::MAX and back to exactly 0 (summed raw it would stay at ∞ − ∞ = NaN, or
+        // land on −f32::MAX).
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(1e30, 0.0, 0.0)).unwrap();
+        c.update(0.0, 0.0, DT);
+        let up = c.update(1e10, 0.0, DT);
+        assert_eq!((up.p, up.output), (f32::MAX, f32::MAX));
+        let down = c.update(-1e10, 0.0, DT);
+        assert_eq!((down.p, down.output), (-f32::MAX, 0.0));
+        // P and I overflowing the opposite ways in one step (ki −1e30 /s, error 1e10 for
+        // 1 s: I = −1e40): +f32::MAX and −f32::MAX, an output of 0, not NaN.
+        let mut c = IncrementalPid::new(IncrementalPidConfig::new(1e30, -1e30, 0.0)).unwrap();
+        c.update(0.0, 0.0, DT);
+        let t = c.update(1e10, 0.0, 1.0);
+        assert_eq!((t.p, t.i, t.output), (f32::MAX, -f32::MAX, 0.0));
     }
 
     #[test]

@@ -256,7 +256,7 @@ pub(super) fn clamp_abs(x: f32, lim: f32) -> f32 {
 }
 
 /// A limit capped at `f32::MAX` (infinity, "no limit", becomes the largest finite value).
-const fn cap(limit: f32) -> f32 {
+pub(super) const fn cap(limit: f32) -> f32 {
     if limit < f32::MAX { limit } else { f32::MAX }
 }
 
