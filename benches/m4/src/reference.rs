@@ -24,8 +24,9 @@
 //! - PID steps ([`RefPid`]): a non-finite target or measurement gives 0 and leaves the state
 //!   alone; the positional step with the speed PI's integral and limits plus a derivative on
 //!   the measurement, I and D skipped when their gain is 0; the incremental one in RC10_LIB's
-//!   form (gains per second) with an output limit, its D term skipped when kd is 0; the
-//!   output returned as one `f32`.
+//!   form (gains per second) with an output limit, its D term skipped when kd is 0, and
+//!   once more with rc10's checks but the tracking differentiator's
+//!   ([`RefPid::incremental_checked`]); the output returned as one `f32`.
 //!
 //! What rc10 does beyond this on the same paths (control modes, the per-term record, the
 //! statistics window, frames built from declared IDs, slots held to their node, derating,
@@ -321,6 +322,14 @@ pub struct RefPid {
     second_error: f32,
     previous_measurement: f32,
     output: f32,
+    /// The deadband as one comparison (a step runs when `|error| > band`; −1 for none).
+    band: f32,
+    /// Whether `previous_error` holds an error (the first step has none).
+    started: bool,
+    /// D's part of the output at the last step (kd times the error's rate).
+    previous_d: f32,
+    /// The terms of the last step: P, I, D and the output.
+    terms: [f32; 4],
 }
 
 impl RefPid {
@@ -337,6 +346,10 @@ impl RefPid {
             second_error: 0.0,
             previous_measurement: 0.0,
             output: 0.0,
+            band: -1.0,
+            started: false,
+            previous_d: 0.0,
+            terms: [0.0; 4],
         }
     }
 
@@ -388,5 +401,65 @@ impl RefPid {
         self.second_error = self.previous_error;
         self.previous_error = error;
         self.output
+    }
+
+    /// The terms of the last [`incremental_checked`](Self::incremental_checked) step: P, I,
+    /// D and the output.
+    pub const fn last_terms(&self) -> [f32; 4] {
+        self.terms
+    }
+
+    /// One incremental step with what rc10's incremental controller adds to
+    /// [`incremental`](Self::incremental), except the tracking differentiator: an invalid `dt`
+    /// or an error inside the deadband holds the output (and records it); the first step
+    /// takes the error as its own previous one; D is kd times the change of the error's rate
+    /// (skipped when kd is 0); an infinite or NaN term is held at ±`f32::MAX` or 0 (tested
+    /// once, on the sum); the terms are recorded for tuning. The output is returned alone.
+    #[inline(never)]
+    pub fn incremental_checked(&mut self, target: f32, measurement: f32, dt_s: f32) -> f32 {
+        if !(target.is_finite() && measurement.is_finite()) {
+            return 0.0;
+        }
+        let error = target - measurement;
+        // Positive, finite `dt`: the bit patterns 1..=0x7F7F_FFFF.
+        let dt_ok = dt_s.to_bits().wrapping_sub(1) < 0x7F7F_FFFF;
+        if !dt_ok || error.abs() <= self.band {
+            self.terms = [0.0, 0.0, 0.0, self.output];
+            return self.output;
+        }
+        let previous = if self.started {
+            self.previous_error
+        } else {
+            error
+        };
+        let (d_now, d) = if self.kd == 0.0 {
+            (0.0, -self.previous_d)
+        } else {
+            let d_now = self.kd * (error - previous) / dt_s;
+            (d_now, d_now - self.previous_d)
+        };
+        let (mut p, mut i) = (self.kp * (error - previous), self.ki * error * dt_s);
+        let mut sum = self.output + p + i + d;
+        if !sum.is_finite() {
+            p = held_finite(p);
+            i = held_finite(i);
+            sum = self.output + p + i + held_finite(d);
+        }
+        self.output = clamp(sum, -self.output_limit, self.output_limit);
+        self.previous_error = error;
+        self.previous_d = d_now;
+        self.started = true;
+        self.terms = [p, i, d, self.output];
+        self.output
+    }
+}
+
+/// `x`, or ±`f32::MAX` for ±infinity, or 0 for NaN (off the common path).
+#[cold]
+fn held_finite(x: f32) -> f32 {
+    if x.is_nan() {
+        0.0
+    } else {
+        clamp(x, -f32::MAX, f32::MAX)
     }
 }

@@ -269,6 +269,15 @@ fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
         }));
     }
     f.reference_row("ref_pid_incremental", s);
+    let mut checked = RefPid::new(18.0, 15.0, 0.0, 0.0, 15.0);
+    for (i, slot) in s.iter_mut().enumerate() {
+        let m = (i % 97) as f32;
+        *slot = f.cal.instructions(ticks(|| {
+            checked.incremental_checked(black_box(300.0), m, black_box(0.001))
+        }));
+    }
+    black_box(checked.last_terms());
+    f.reference_row("ref_pid_incremental_checked", s);
 }
 
 #[entry]
