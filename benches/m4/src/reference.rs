@@ -18,7 +18,9 @@
 //!   left as it was;
 //! - feedback: the frame's ID picks the motor from a table; under its lock, the DLC checked,
 //!   rotor angle, speed, torque current and temperature parsed, the multi-turn count advanced
-//!   by the shortest way between two angles (exact, 64-bit) and the arrival stamped;
+//!   by the shortest way between two angles (exact, 64-bit) and the arrival stamped; and
+//!   once more with rc10's frame checks ([`dispatch_checked`]: statistics, order, repeats,
+//!   turns counted across lost and late frames, the arrival estimated, derating);
 //! - angle mode: every 10th tick, the output's multi-turn angle from the turn count and a
 //!   positional angle step ([`RefPid::positional`]) give the speed loop's target;
 //! - PID steps ([`RefPid`]): a non-finite target or measurement gives 0 and leaves the state
@@ -30,11 +32,10 @@
 //!
 //! What rc10 does beyond this on the same paths (control modes, the per-term record, the
 //! statistics window, frames built from declared IDs, slots held to their node, derating,
-//! integrals held on stale feedback, frames stamped before the newest refused, turn counting
-//! through a receive stall, …) is listed in BENCHMARKS.md.
+//! integrals held on stale feedback, …) is listed in BENCHMARKS.md.
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicI32, Ordering};
+use core::sync::atomic::{AtomicI32, AtomicU32, Ordering};
 use rc10_core::can::CanFrame;
 
 /// Offline after this long without feedback, in µs.
@@ -61,6 +62,19 @@ pub struct State {
     angle_target_deg: f32,
     angle_loop: RefPid,
     ticks_to_angle_loop: u8,
+    /// The last frame's eight bytes (a repeat of them is no step).
+    last_data: u64,
+    /// How late the last frame was read after it arrived, as best known, in µs.
+    arrival_lag_us: u32,
+    /// The last tick's time, in µs (a frame stamped far after it is not trusted); 0 before
+    /// the first tick.
+    last_tick_us: u64,
+    /// The derating factor of the current limit at the last temperature.
+    derate: f32,
+    /// The last frame's rotor speed, in rotor rpm.
+    rotor_rpm: i16,
+    /// Offline since the last frame: the next one counts no lost turns.
+    awaiting_return: bool,
 }
 
 /// Output degrees per rotor count of an M3508 (360° per 8192 counts, 3591/187 reduction).
@@ -88,6 +102,12 @@ impl State {
             // rc10's M3508 angle loop: 8 output rpm per degree, at most 400 rpm.
             angle_loop: RefPid::new(8.0, 0.0, 0.0, 0.0, 400.0),
             ticks_to_angle_loop: 0,
+            last_data: 0,
+            arrival_lag_us: 0,
+            last_tick_us: 0,
+            derate: 1.0,
+            rotor_rpm: 0,
+            awaiting_return: false,
         }
     }
 }
@@ -120,6 +140,9 @@ pub trait Node {
     fn pack(&self, frame: &mut [u8; 8]);
     /// Takes a feedback frame's data.
     fn on_feedback(&self, data: &[u8], now_us: u64);
+    /// Takes a feedback frame with the checks of [`dispatch_checked`]; `false` when it
+    /// refuses it.
+    fn on_feedback_checked(&self, frame: &CanFrame, now_us: u64) -> bool;
 }
 
 /// A reference motor: `CHECKED` adds liveness and the NaN rule (the lock is `L`'s),
@@ -204,6 +227,7 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool> N
     fn update(&self, now_us: u64, dt_s: f32) {
         let raw = self.state.with(|s| {
             if CHECKED && now_us.wrapping_sub(s.last_feedback_us) > TIMEOUT_US {
+                s.awaiting_return = true;
                 s.integral = 0.0;
                 s.output_amps = 0.0;
                 return 0;
@@ -271,6 +295,108 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool> N
             s.last_feedback_us = now_us;
         });
     }
+
+    #[inline(never)]
+    fn on_feedback_checked(&self, frame: &CanFrame, now_us: u64) -> bool {
+        let Some(data) = frame.data8() else {
+            return false;
+        };
+        self.state
+            .with(|s| s.feedback_checked(data, now_us))
+            .unwrap_or(false)
+    }
+}
+
+/// A feedback period of the C620, in µs.
+const PERIOD_US: u32 = 1000;
+
+impl State {
+    /// A DJI feedback frame's eight bytes at `now_us`, with what rc10 checks on this path:
+    /// an angle beyond 8191 and a frame stamped before the newest one refused; the same
+    /// eight bytes again taken as no step (the stamp moves, the estimated arrival with it);
+    /// the turn count advanced by the wrapped step plus the whole turns nearest the mean
+    /// reported speed over the time since the last frame arrived (frames lost or read late
+    /// do not lose turns; a stamp more than 2 ms after the last tick is taken as one period;
+    /// after an outage the half-turn rule); the lateness of this frame's reading estimated
+    /// for the next; the limit derated when the temperature changes. Simpler than rc10's
+    /// (which searches whole periods when the speed makes them differ).
+    #[inline(always)]
+    fn feedback_checked(&mut self, data: &[u8; 8], now_us: u64) -> bool {
+        let &[a0, a1, r0, r1, c0, c1, temperature_c, _] = data;
+        let angle = u16::from_be_bytes([a0, a1]);
+        if angle >= 8192 || now_us < self.last_feedback_us {
+            return false;
+        }
+        let since_us = u32::try_from(now_us - self.last_feedback_us).unwrap_or(u32::MAX);
+        let since_arrival_us = since_us.saturating_add(self.arrival_lag_us);
+        let bytes = u64::from_ne_bytes(*data);
+        if bytes == self.last_data {
+            self.arrival_lag_us = if since_us > PERIOD_US / 2 {
+                0
+            } else {
+                since_arrival_us
+            };
+            self.last_feedback_us = now_us;
+            return true;
+        }
+        self.last_data = bytes;
+        let rotor_rpm = i16::from_be_bytes([r0, r1]);
+        let wrapped =
+            (i32::from(angle) - i32::from(self.last_angle) + 4096).rem_euclid(8192) - 4096;
+        let step = if self.awaiting_return {
+            // Back from an outage: the half-turn rule, no speed history.
+            self.awaiting_return = false;
+            self.arrival_lag_us = 0;
+            wrapped
+        } else {
+            let trusted = self.last_tick_us == 0
+                || now_us.wrapping_sub(self.last_tick_us) <= 2 * u64::from(PERIOD_US);
+            let periods = if trusted {
+                since_arrival_us as f32 * (1.0 / PERIOD_US as f32)
+            } else {
+                1.0
+            };
+            // Rotor rpm to counts a period: 8192 counts a turn, 60,000 periods a minute.
+            let mean_rpm = f32::from(self.rotor_rpm) + f32::from(rotor_rpm);
+            let counts_per_period = mean_rpm * (0.5 * 8192.0 / 60_000.0);
+            let off = counts_per_period * periods - wrapped as f32;
+            let whole = (periods + 0.5) as u32;
+            let interval_us = whole.max(1).saturating_mul(PERIOD_US);
+            self.arrival_lag_us = since_arrival_us.saturating_sub(interval_us);
+            if off.abs() * 2.0 < 8192.0 {
+                wrapped
+            } else {
+                plus_whole_turns(wrapped, off)
+            }
+        };
+        self.rotor_counts = self.rotor_counts.wrapping_add(i64::from(step));
+        self.last_angle = angle;
+        self.rotor_rpm = rotor_rpm;
+        self.speed_rpm = f32::from(rotor_rpm) * (187.0 / 3591.0);
+        self.current_raw = i16::from_be_bytes([c0, c1]);
+        if temperature_c != self.temperature_c {
+            self.temperature_c = temperature_c;
+            self.derate = derating(temperature_c);
+        }
+        self.last_feedback_us = now_us;
+        true
+    }
+}
+
+/// `step` plus the whole turns of 8192 counts nearest `off` (off the common path: more
+/// than half a turn between the step and the prediction).
+#[cold]
+#[inline(never)]
+fn plus_whole_turns(step: i32, off: f32) -> i32 {
+    step.saturating_add(((off * (1.0 / 8192.0)) as i32).saturating_mul(8192))
+}
+
+/// The limit's derating factor at a winding temperature: 1 up to 100 °C, down to 0 at
+/// 125 °C.
+#[cold]
+#[inline(never)]
+fn derating(celsius: u8) -> f32 {
+    clamp((125.0 - f32::from(celsius)) * (1.0 / 25.0), 0.0, 1.0)
 }
 
 /// A turn count beyond 32 bits as `f32` (a library call on the M4): behind its own cold call,
@@ -308,6 +434,57 @@ pub fn dispatch(nodes: &[&dyn Node; 4], frame: &CanFrame, now_us: u64) {
     {
         node.on_feedback(frame.data(), now_us);
     }
+}
+
+/// Frame statistics of a bus: frames and bits received (what load and rates are computed
+/// from when read).
+pub struct RxStats {
+    frames: AtomicU32,
+    bits: AtomicU32,
+}
+
+impl RxStats {
+    /// Nothing received yet.
+    pub const fn new() -> Self {
+        Self {
+            frames: AtomicU32::new(0),
+            bits: AtomicU32::new(0),
+        }
+    }
+
+    /// Frames received so far.
+    pub fn frames(&self) -> u32 {
+        self.frames.load(Ordering::Relaxed)
+    }
+}
+
+impl Default for RxStats {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// [`dispatch`] with rc10's checks on the frame path: the frame and its bits counted, then
+/// routed as there to [`Node::on_feedback_checked`]. Returns whether a motor took it.
+#[inline(never)]
+pub fn dispatch_checked(
+    nodes: &[&dyn Node; 4],
+    stats: &RxStats,
+    frame: &CanFrame,
+    now_us: u64,
+) -> bool {
+    stats.frames.fetch_add(1, Ordering::Relaxed);
+    let header_bits = if frame.is_extended() { 67 } else { 47 };
+    let bits = header_bits + 8 * frame.data().len() as u32;
+    stats.bits.fetch_add(bits, Ordering::Relaxed);
+    if frame.is_extended() {
+        return false;
+    }
+    usize::try_from(frame.raw_id())
+        .ok()
+        .and_then(|id| id.checked_sub(0x201))
+        .and_then(|index| nodes.get(index))
+        .is_some_and(|node| node.on_feedback_checked(frame, now_us))
 }
 
 /// A reference PID's state and gains (gains per second: `ki` × s, `kd` ÷ s).

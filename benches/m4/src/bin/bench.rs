@@ -16,7 +16,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
-use rc10_bench_m4::reference::{self, Lock, Node, RefMotor, RefPid, State};
+use rc10_bench_m4::reference::{self, Lock, Node, RefMotor, RefPid, RxStats, State};
 use rc10_bench_m4::{Calibration, min_median_max, ticks, timer_start};
 use rc10_core::bus::{Bus, BusBuilder};
 use rc10_core::can::CanFrame;
@@ -251,6 +251,41 @@ fn reference_rows(f: &Figures, s: &mut [u32; SAMPLES]) {
         }));
     }
     f.reference_row("ref_dispatch_4_checked", s);
+    let stats = RxStats::new();
+    let fresh: [RefMotor<critical_section::Mutex<RefCell<State>>, true, false>; 4] = [
+        RefMotor::new(
+            critical_section::Mutex::new(RefCell::new(State::new(300.0))),
+            0,
+        ),
+        RefMotor::new(
+            critical_section::Mutex::new(RefCell::new(State::new(300.0))),
+            1,
+        ),
+        RefMotor::new(
+            critical_section::Mutex::new(RefCell::new(State::new(300.0))),
+            2,
+        ),
+        RefMotor::new(
+            critical_section::Mutex::new(RefCell::new(State::new(300.0))),
+            3,
+        ),
+    ];
+    let nodes: [&dyn Node; 4] = [&fresh[0], &fresh[1], &fresh[2], &fresh[3]];
+    for (k, slot) in s.iter_mut().enumerate() {
+        let k = k as u32;
+        let frame = feedback(4, k);
+        let now_us = 5_000_000 + u64::from(k) * 1000;
+        *slot = f.cal.instructions(ticks(|| {
+            reference::dispatch_checked(&nodes, &stats, black_box(&frame), now_us)
+        }));
+    }
+    if stats.frames() != SAMPLES as u32 {
+        hprintln!(
+            "ref_dispatch_4_frame_checks: {} frames counted",
+            stats.frames()
+        );
+    }
+    f.reference_row("ref_dispatch_4_frame_checks", s);
     // The PID rows' gains and inputs (kp 0.6, ki 8, kd 0.001; limits 10 and 20; incremental
     // kp 18, ki 15, limit 15).
     let mut positional = RefPid::new(0.6, 8.0, 0.001, 10.0, 20.0);
