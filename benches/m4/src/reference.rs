@@ -66,9 +66,8 @@ pub struct State {
     last_data: u64,
     /// How late the last frame was read after it arrived, as best known, in µs.
     arrival_lag_us: u32,
-    /// The last tick's time, in µs (a frame stamped far after it is not trusted); 0 before
-    /// the first tick.
-    last_tick_us: u64,
+    /// The last tick's time, in µs (a frame stamped far after it is not trusted).
+    last_tick_us: Option<u64>,
     /// The derating factor of the current limit at the last temperature.
     derate: f32,
     /// The last frame's rotor speed, in rotor rpm.
@@ -104,10 +103,11 @@ impl State {
             ticks_to_angle_loop: 0,
             last_data: 0,
             arrival_lag_us: 0,
-            last_tick_us: 0,
+            last_tick_us: None,
             derate: 1.0,
             rotor_rpm: 0,
-            awaiting_return: false,
+            // No frame yet: the first one counts no turns.
+            awaiting_return: true,
         }
     }
 }
@@ -184,6 +184,12 @@ fn clamp(x: f32, low: f32, high: f32) -> f32 {
 }
 
 impl State {
+    /// Records a tick at `now_us` as rc10's tick does (the tick rows leave it out: one store
+    /// a motor that only the frame checks read).
+    pub fn set_last_tick(&mut self, now_us: u64) {
+        self.last_tick_us = Some(now_us);
+    }
+
     /// Sets the measured speed and the arrival stamp (the bench's feedback).
     pub fn set_feedback(&mut self, speed_rpm: f32, rotor_counts: i64, now_us: u64) {
         self.speed_rpm = speed_rpm;
@@ -228,6 +234,7 @@ impl<L: Lock, const CHECKED: bool, const INCREMENTAL: bool, const ANGLE: bool> N
         let raw = self.state.with(|s| {
             if CHECKED && now_us.wrapping_sub(s.last_feedback_us) > TIMEOUT_US {
                 s.awaiting_return = true;
+                s.last_data = u64::MAX;
                 s.integral = 0.0;
                 s.output_amps = 0.0;
                 return 0;
@@ -314,12 +321,14 @@ impl State {
     /// A DJI feedback frame's eight bytes at `now_us`, with what rc10 checks on this path:
     /// an angle beyond 8191 and a frame stamped before the newest one refused; the same
     /// eight bytes again taken as no step (the stamp moves, the estimated arrival with it);
-    /// the turn count advanced by the wrapped step plus the whole turns nearest the mean
-    /// reported speed over the time since the last frame arrived (frames lost or read late
-    /// do not lose turns; a stamp more than 2 ms after the last tick is taken as one period;
-    /// after an outage the half-turn rule); the lateness of this frame's reading estimated
-    /// for the next; the limit derated when the temperature changes. Simpler than rc10's
-    /// (which searches whole periods when the speed makes them differ).
+    /// the turn count advanced by the wrapped step plus the whole turns nearest what the mean
+    /// reported speed predicts over the time since the last frame arrived (lost frames lose
+    /// no turns; a stamp more than 2 ms after the last tick is taken as one period; the first
+    /// frame and the first after an outage take the half-turn rule); the lateness of this
+    /// frame's reading estimated for the next; the limit derated when the temperature
+    /// changes. Simpler than rc10's turn counting, which at speed also searches whole
+    /// periods around the stamps' gap, and so still counts right the first frame of a
+    /// backlog read late.
     #[inline(always)]
     fn feedback_checked(&mut self, data: &[u8; 8], now_us: u64) -> bool {
         let &[a0, a1, r0, r1, c0, c1, temperature_c, _] = data;
@@ -331,8 +340,9 @@ impl State {
         let since_arrival_us = since_us.saturating_add(self.arrival_lag_us);
         let bytes = u64::from_ne_bytes(*data);
         if bytes == self.last_data {
+            // Read more than half a period on: the next frame of a motor at rest.
             self.arrival_lag_us = if since_us > PERIOD_US / 2 {
-                0
+                arrival_lag_us(since_arrival_us, since_us, 1)
             } else {
                 since_arrival_us
             };
@@ -349,8 +359,9 @@ impl State {
             self.arrival_lag_us = 0;
             wrapped
         } else {
-            let trusted = self.last_tick_us == 0
-                || now_us.wrapping_sub(self.last_tick_us) <= 2 * u64::from(PERIOD_US);
+            let trusted = self
+                .last_tick_us
+                .is_none_or(|tick| now_us.saturating_sub(tick) <= 2 * u64::from(PERIOD_US));
             let periods = if trusted {
                 since_arrival_us as f32 * (1.0 / PERIOD_US as f32)
             } else {
@@ -360,9 +371,8 @@ impl State {
             let mean_rpm = f32::from(self.rotor_rpm) + f32::from(rotor_rpm);
             let counts_per_period = mean_rpm * (0.5 * 8192.0 / 60_000.0);
             let off = counts_per_period * periods - wrapped as f32;
-            let whole = (periods + 0.5) as u32;
-            let interval_us = whole.max(1).saturating_mul(PERIOD_US);
-            self.arrival_lag_us = since_arrival_us.saturating_sub(interval_us);
+            let whole = ((periods + 0.5) as u32).max(1);
+            self.arrival_lag_us = arrival_lag_us(since_arrival_us, since_us, whole);
             if off.abs() * 2.0 < 8192.0 {
                 wrapped
             } else {
@@ -388,7 +398,23 @@ impl State {
 #[cold]
 #[inline(never)]
 fn plus_whole_turns(step: i32, off: f32) -> i32 {
-    step.saturating_add(((off * (1.0 / 8192.0)) as i32).saturating_mul(8192))
+    let turns = off * (1.0 / 8192.0) + if off >= 0.0 { 0.5 } else { -0.5 };
+    step.saturating_add((turns as i32).saturating_mul(8192))
+}
+
+/// How late a frame was read after it arrived, `periods` whole periods after the last one:
+/// the time since that one's arrival beyond the interval when it is more than half a
+/// period over and the stamps are not simply a period apart, else 0 (rc10's estimate).
+#[inline(always)]
+fn arrival_lag_us(since_arrival_us: u32, since_newest_us: u32, periods: u32) -> u32 {
+    let interval_us = periods.min(4_000_000).saturating_mul(PERIOD_US);
+    let late = since_arrival_us > interval_us.saturating_add(PERIOD_US / 2);
+    let paced = since_newest_us.abs_diff(interval_us) <= PERIOD_US / 2;
+    if late && !paced {
+        since_arrival_us - interval_us
+    } else {
+        0
+    }
 }
 
 /// The limit's derating factor at a winding temperature: 1 up to 100 °C, down to 0 at
@@ -503,6 +529,8 @@ pub struct RefPid {
     band: f32,
     /// Whether `previous_error` holds an error (the first step has none).
     started: bool,
+    /// Seconds since `previous_error` (the valid `dt`s of the steps inside the deadband).
+    since_s: f32,
     /// D's part of the output at the last step (kd times the error's rate).
     previous_d: f32,
     /// The terms of the last step: P, I, D and the output.
@@ -517,7 +545,12 @@ impl RefPid {
             ki,
             kd,
             integral_limit,
-            output_limit,
+            // Capped: no limit is the largest finite value, so the output stays finite.
+            output_limit: if output_limit < f32::MAX {
+                output_limit
+            } else {
+                f32::MAX
+            },
             integral: 0.0,
             previous_error: 0.0,
             second_error: 0.0,
@@ -525,6 +558,7 @@ impl RefPid {
             output: 0.0,
             band: -1.0,
             started: false,
+            since_s: 0.0,
             previous_d: 0.0,
             terms: [0.0; 4],
         }
@@ -601,6 +635,9 @@ impl RefPid {
         // Positive, finite `dt`: the bit patterns 1..=0x7F7F_FFFF.
         let dt_ok = dt_s.to_bits().wrapping_sub(1) < 0x7F7F_FFFF;
         if !dt_ok || error.abs() <= self.band {
+            if dt_ok {
+                self.since_s += dt_s;
+            }
             self.terms = [0.0, 0.0, 0.0, self.output];
             return self.output;
         }
@@ -609,10 +646,12 @@ impl RefPid {
         } else {
             error
         };
-        let (d_now, d) = if self.kd == 0.0 {
-            (0.0, -self.previous_d)
+        let limit = self.output_limit;
+        let (d_now, mut d) = if self.kd == 0.0 {
+            (0.0, 0.0 - self.previous_d)
         } else {
-            let d_now = self.kd * (error - previous) / dt_s;
+            let rate = self.kd * (error - previous) / (self.since_s + dt_s);
+            let d_now = clamp(held_finite(rate), -limit, limit);
             (d_now, d_now - self.previous_d)
         };
         let (mut p, mut i) = (self.kp * (error - previous), self.ki * error * dt_s);
@@ -620,19 +659,20 @@ impl RefPid {
         if !sum.is_finite() {
             p = held_finite(p);
             i = held_finite(i);
-            sum = self.output + p + i + held_finite(d);
+            d = held_finite(d);
+            sum = self.output + p + i + d;
         }
-        self.output = clamp(sum, -self.output_limit, self.output_limit);
+        self.output = clamp(sum, -limit, limit);
         self.previous_error = error;
         self.previous_d = d_now;
+        self.since_s = 0.0;
         self.started = true;
         self.terms = [p, i, d, self.output];
         self.output
     }
 }
 
-/// `x`, or ±`f32::MAX` for ±infinity, or 0 for NaN (off the common path).
-#[cold]
+/// `x`, or ±`f32::MAX` for ±infinity, or 0 for NaN (off the common path for the terms).
 fn held_finite(x: f32) -> f32 {
     if x.is_nan() {
         0.0

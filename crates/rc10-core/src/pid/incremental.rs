@@ -254,7 +254,10 @@ impl IncrementalPid {
         // kd = 0 (the usual speed loop): no divide, and no D at all (the kept part is 0
         // whenever kd is: `set_config` scales it by the gain's ratio).
         let (d_now, d) = if c.kd == 0.0 {
-            (0.0, -d_before)
+            // The kept part is ±0 whenever kd is 0 (`set_config` scales it by the gains'
+            // ratio), so the change of rate is +0 exactly (`−d_before` could be −0, which
+            // would carry into the output's sign of zero).
+            (0.0, 0.0)
         } else {
             let since_s = self.since_s + dt_s;
             let d_now = clamp_abs(finite(c.kd * (e - e1) / since_s), limit);
@@ -502,8 +505,8 @@ mod tests {
     fn an_overflowing_term_is_held_at_the_largest_float_before_the_sum() {
         // No limit, kp 1e30: errors 0, then 1e10 (P = 1e40, past f32::MAX ≈ 3.4e38), then
         // −1e10 (P = −2e40). Each P is held at ±f32::MAX before it is added: the output goes
-        // to f32::MAX and back to exactly 0 (summed raw it would stay at ∞ − ∞ = NaN, or
-        // land on −f32::MAX).
+        // to f32::MAX and back to exactly 0 (summed raw, P would read ∞ and the output land
+        // on −f32::MAX: ∞ clamped, then −∞ added).
         let mut c = IncrementalPid::new(IncrementalPidConfig::new(1e30, 0.0, 0.0)).unwrap();
         c.update(0.0, 0.0, DT);
         let up = c.update(1e10, 0.0, DT);
@@ -516,6 +519,24 @@ mod tests {
         c.update(0.0, 0.0, DT);
         let t = c.update(1e10, 0.0, 1.0);
         assert_eq!((t.p, t.i, t.output), (f32::MAX, -f32::MAX, 0.0));
+    }
+
+    #[test]
+    fn kd_switched_off_leaves_no_d_and_no_negative_zero() {
+        // kd 0.001 on a falling error (−1 a ms: a kept D part of −1), then kd 0: the kept
+        // part scales to −0. The next step's D is +0 (the rates' change is 0 − 0), and
+        // P and I alone move the output: kp · (−3 − (−2)) + ki · (−3) · 0.001 = −1 − 0.003.
+        let cfg = IncrementalPidConfig::new(1.0, 1.0, 0.001);
+        let mut c = IncrementalPid::new(cfg).unwrap();
+        for e in [0.0, -1.0, -2.0] {
+            c.update(e, 0.0, DT);
+        }
+        let before = c.output();
+        c.set_config(IncrementalPidConfig { kd: 0.0, ..cfg })
+            .unwrap();
+        let t = c.update(-3.0, 0.0, DT);
+        assert_eq!(t.d.to_bits(), 0.0f32.to_bits());
+        assert!((t.output - (before - 1.003)).abs() < 1e-5, "{t:?}");
     }
 
     #[test]
@@ -605,7 +626,87 @@ mod tests {
         assert_eq!(c.update(0.0, 0.0, DT).output, 3.0);
     }
 
+    /// The step as documented, written out plainly with every term held finite before the
+    /// sum (no shortcut): what `update` must equal bit for bit, without a TD.
+    struct Plain {
+        kp: f32,
+        ki: f32,
+        kd: f32,
+        limit: f32,
+        band: f32,
+        output: f32,
+        history: Option<(f32, f32)>,
+        since_s: f32,
+    }
+
+    impl Plain {
+        fn step(&mut self, target: f32, measurement: f32, dt_s: f32) -> PidTerms {
+            if !(target.is_finite() && measurement.is_finite()) {
+                return PidTerms::ZERO;
+            }
+            let e = target - measurement;
+            let dt_ok = dt_s.is_finite() && dt_s > 0.0;
+            if !dt_ok || e.abs() <= self.band {
+                if dt_ok {
+                    self.since_s += dt_s;
+                }
+                return PidTerms {
+                    output: self.output,
+                    ..PidTerms::ZERO
+                };
+            }
+            let (e1, d_before) = self.history.unwrap_or((e, 0.0));
+            let cap = self.limit.min(f32::MAX);
+            let d_now = if self.kd == 0.0 {
+                0.0
+            } else {
+                finite(self.kd * (e - e1) / (self.since_s + dt_s)).clamp(-cap, cap)
+            };
+            let p = finite(self.kp * (e - e1));
+            let i = finite(self.ki * e * dt_s);
+            let d = finite(d_now - d_before);
+            self.output = (self.output + p + i + d).clamp(-cap, cap);
+            self.history = Some((e, d_now));
+            self.since_s = 0.0;
+            PidTerms {
+                p,
+                i,
+                d,
+                ff: 0.0,
+                output: self.output,
+            }
+        }
+    }
+
     proptest! {
+        #[test]
+        fn the_step_is_the_plain_documented_step_bit_for_bit(
+            kp in prop_oneof![Just(0.0f32), -1e3f32..1e3, -1e36f32..1e36],
+            ki in prop_oneof![Just(0.0f32), -1e3f32..1e3, -1e36f32..1e36],
+            kd in prop_oneof![Just(0.0f32), -1.0f32..1.0, -1e36f32..1e36],
+            limit in prop_oneof![Just(f32::INFINITY), 0.0f32..1e3],
+            deadband in prop_oneof![Just(0.0f32), 0.0f32..5.0],
+            steps in proptest::collection::vec(
+                (prop_oneof![-1e4f32..1e4, -3e38f32..3e38, Just(-0.0f32), proptest::num::f32::ANY],
+                 prop_oneof![-1e4f32..1e4, -3e38f32..3e38, Just(0.0f32)],
+                 prop_oneof![Just(0.001f32), 1e-30f32..10.0, proptest::num::f32::ANY]),
+                1..48),
+        ) {
+            let config = IncrementalPidConfig::new(kp, ki, kd)
+                .with_output_limit(limit)
+                .with_deadband(deadband);
+            let mut c = IncrementalPid::new(config).unwrap();
+            let band = if deadband == 0.0 { -1.0 } else { deadband };
+            let mut plain = Plain {
+                kp, ki, kd, limit, band, output: 0.0, history: None, since_s: 0.0,
+            };
+            let bits = |t: PidTerms| [t.p, t.i, t.d, t.ff, t.output].map(f32::to_bits);
+            for (target, measurement, dt) in steps {
+                prop_assert_eq!(bits(c.update(target, measurement, dt)), bits(plain.step(target, measurement, dt)));
+                prop_assert_eq!(c.output().to_bits(), plain.output.to_bits());
+            }
+        }
+
         #[test]
         fn output_finite_and_limited_for_any_input(
             kp in -1e4f32..1e4, ki in -1e4f32..1e4, kd in -10f32..10.0,
