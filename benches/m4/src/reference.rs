@@ -37,6 +37,7 @@
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicI32, AtomicU32, Ordering};
 use rc10_core::can::CanFrame;
+use rc10_core::math::finite;
 
 /// Offline after this long without feedback, in µs.
 const TIMEOUT_US: u64 = 100_000;
@@ -651,15 +652,15 @@ impl RefPid {
             (0.0, 0.0 - self.previous_d)
         } else {
             let rate = self.kd * (error - previous) / (self.since_s + dt_s);
-            let d_now = clamp(held_finite(rate), -limit, limit);
+            let d_now = clamp(finite(rate), -limit, limit);
             (d_now, d_now - self.previous_d)
         };
         let (mut p, mut i) = (self.kp * (error - previous), self.ki * error * dt_s);
         let mut sum = self.output + p + i + d;
         if !sum.is_finite() {
-            p = held_finite(p);
-            i = held_finite(i);
-            d = held_finite(d);
+            p = finite(p);
+            i = finite(i);
+            d = finite(d);
             sum = self.output + p + i + d;
         }
         self.output = clamp(sum, -limit, limit);
@@ -669,14 +670,5 @@ impl RefPid {
         self.started = true;
         self.terms = [p, i, d, self.output];
         self.output
-    }
-}
-
-/// `x`, or ±`f32::MAX` for ±infinity, or 0 for NaN (off the common path for the terms).
-fn held_finite(x: f32) -> f32 {
-    if x.is_nan() {
-        0.0
-    } else {
-        clamp(x, -f32::MAX, f32::MAX)
     }
 }

@@ -251,31 +251,25 @@ impl IncrementalPid {
         }
         let (e1, d_before) = self.history.unwrap_or((e, 0.0));
         let limit = self.limit;
-        // kd = 0 (the usual speed loop): no divide, and no D at all (the kept part is 0
-        // whenever kd is: `set_config` scales it by the gain's ratio).
+        // kd = 0 (the usual speed loop): no divide and no D. The kept part is ±0 then
+        // (`set_config` scales it by the gains' ratio), so the change of rate is +0 exactly
+        // (`−d_before` could be −0, which would carry into the output's sign of zero).
         let (d_now, d) = if c.kd == 0.0 {
-            // The kept part is ±0 whenever kd is 0 (`set_config` scales it by the gains'
-            // ratio), so the change of rate is +0 exactly (`−d_before` could be −0, which
-            // would carry into the output's sign of zero).
             (0.0, 0.0)
         } else {
             let since_s = self.since_s + dt_s;
             let d_now = clamp_abs(finite(c.kd * (e - e1) / since_s), limit);
             (d_now, d_now - d_before)
         };
-        let (mut p, mut i) = (c.kp * (e - e1), c.ki * e * dt_s);
+        let (mut p, mut i, mut d) = (c.kp * (e - e1), c.ki * e * dt_s, d);
         let mut sum = self.output + p + i + d;
-        let d = if sum.is_finite() {
-            // Then so is every term (an infinite or NaN one makes the sum infinite or NaN):
-            // each is its own `finite` value, checked once for all.
-            d
-        } else {
-            // Each term held finite, then summed again: finite or ±inf, never NaN.
-            (p, i) = (finite(p), finite(i));
-            let d = finite(d);
+        // A finite sum has finite terms (an infinite or NaN one makes it infinite or NaN),
+        // each its own `finite` value: checked once for all. Otherwise each term is held
+        // finite and the sum redone: finite or ±inf, never NaN.
+        if !sum.is_finite() {
+            (p, i, d) = (finite(p), finite(i), finite(d));
             sum = self.output + p + i + d;
-            d
-        };
+        }
         // The capped limit is finite.
         self.output = clamp_abs(sum, limit);
         self.history = Some((e, d_now));
