@@ -163,14 +163,14 @@ fn motor_bit(motor: usize) -> u64 {
 }
 
 /// Applies the faults that set a state (bus-off, no acknowledgement, power cut, stall,
-/// over-temperature) at `t_ms`; one-shot faults fire only `on_ms_edge`. A state is on while
-/// any of its windows is: a motor can be cut twice, the bus go off twice.
+/// over-temperature) at the start of millisecond `t_ms` (their windows are whole
+/// milliseconds: nothing changes within one). A state is on while any of its windows is: a
+/// motor can be cut twice, the bus go off twice.
 pub(super) fn apply_state_faults(
     scenario: &Scenario,
     bus: &mut SimBus,
     escs: &mut [DjiEsc],
     t_ms: u64,
-    on_ms_edge: bool,
 ) {
     // Which states some fault sets (`has_*`, bit masks of motors) and which are on now.
     let (mut has_bus_off, mut bus_off, mut has_no_ack, mut no_ack) = (false, false, false, false);
@@ -209,7 +209,7 @@ pub(super) fn apply_state_faults(
                 motor,
                 at_ms,
                 celsius,
-            } if on_ms_edge && t_ms == at_ms => {
+            } if t_ms == at_ms => {
                 if let Some(esc) = escs.get_mut(motor) {
                     esc.set_temperature_c(celsius);
                 }

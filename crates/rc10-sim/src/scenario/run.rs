@@ -68,7 +68,26 @@ pub(crate) fn uniform(rng: &mut Xoshiro256PlusPlus) -> f64 {
 }
 
 const PLANT_STEP_US: u64 = 200;
+/// [`PLANT_STEP_US`] in seconds.
+const PLANT_STEP_S: f64 = PLANT_STEP_US as f64 * 1e-6;
 pub(super) const TICK_US: u64 = 1000;
+
+/// Steps every plant through each of its step times before `until_us` that it has not taken
+/// yet (`next_plant_us` is the first of them, moved on past the last one taken).
+///
+/// The plants are stepped when something is about to read or change them (a frame reaching
+/// the ESCs, an ESC's feedback, a tick, the state faults at a millisecond's start), not as
+/// events of their own: no other world event happens at a step time that has no other
+/// reason to be one, and every step still runs at its own time, in the same order with
+/// respect to everything that touches the ESCs.
+fn step_plants_before(escs: &mut [DjiEsc], next_plant_us: &mut u64, until_us: u64) {
+    while *next_plant_us < until_us {
+        for esc in escs.iter_mut() {
+            esc.step(*next_plant_us, PLANT_STEP_S);
+        }
+        *next_plant_us += PLANT_STEP_US;
+    }
+}
 
 /// The simulated bus for `scenario`: its bitrate and TX order, the STM32G4's buffer depths.
 fn sim_bus_config(scenario: &Scenario) -> SimBusConfig {
@@ -169,7 +188,10 @@ pub fn run_observed(
     };
 
     let end_us = scenario.duration_ms * 1000;
-    let (mut next_plant, mut next_tick) = (0u64, after_scheduler_stall(scenario, 0));
+    // The next plant step not yet taken, the next millisecond's start (the state faults
+    // change there: their windows are whole milliseconds) and the next tick.
+    let (mut next_plant, mut next_ms) = (0u64, 0u64);
+    let mut next_tick = after_scheduler_stall(scenario, 0);
     let mut pacer = TickPacer::new(Duration::from_micros(TICK_US));
     let mut batch = TxBatch::new();
     let mut samples = Vec::with_capacity(scenario.duration_ms.min(100_000) as usize);
@@ -182,7 +204,7 @@ pub fn run_observed(
     let mut next_feedback_min = next_feedback.iter().copied().min();
 
     loop {
-        let mut t = next_plant.min(next_tick);
+        let mut t = next_ms.min(next_tick);
         if let Some(f) = next_feedback_min {
             t = t.min(f);
         }
@@ -215,6 +237,8 @@ pub fn run_observed(
 
         // A frame ends on the wire: faults, then delivery to everyone but its sender.
         if let Some((sender, frame, mcu_seq)) = bus.complete_with_seq(t) {
+            // The ESCs hear it before their step at `t`, if there is one.
+            step_plants_before(&mut escs, &mut next_plant, t);
             let (received, corrupted) =
                 deliver(scenario, &mut rng, &mut bus, &mut escs, sender, frame, t_ms);
             observer.on_wire(&WireEvent {
@@ -269,15 +293,16 @@ pub fn run_observed(
             }
         }
 
-        if t == next_plant {
-            apply_state_faults(scenario, &mut bus, &mut escs, t_ms, t % 1000 == 0);
-            for esc in &mut escs {
-                esc.step(t, PLANT_STEP_US as f64 * 1e-6);
-            }
-            next_plant += PLANT_STEP_US;
+        if t == next_ms {
+            // The faults' states for this millisecond, then the plants' step at its start.
+            step_plants_before(&mut escs, &mut next_plant, t);
+            apply_state_faults(scenario, &mut bus, &mut escs, t_ms);
+            step_plants_before(&mut escs, &mut next_plant, t + 1);
+            next_ms += 1000;
         }
 
         if next_feedback_min == Some(t) {
+            step_plants_before(&mut escs, &mut next_plant, t + 1);
             for (i, esc) in escs.iter().enumerate() {
                 if next_feedback.get(i) == Some(&t) {
                     if esc.feedback_due(t)
@@ -294,6 +319,7 @@ pub fn run_observed(
         }
 
         if t == next_tick {
+            step_plants_before(&mut escs, &mut next_plant, t + 1);
             for (i, spec) in scenario.targets.iter().enumerate() {
                 let Some(k) = next_step.get_mut(i) else {
                     continue;
@@ -560,6 +586,99 @@ mod tests {
         assert_eq!(backwards.count(), 0, "an older reading after a newer one");
         // Nothing was lost on the way: one frame a ms.
         assert!((298..=300).contains(&seen.0.len()), "{}", seen.0.len());
+    }
+
+    /// Every frame that reached the ESCs, with the time it ended and who sent it, and motor
+    /// 0's true speed and angle at every tick.
+    #[derive(Default)]
+    struct WireAndTruth {
+        wire: Vec<(u64, Sender, CanFrame)>,
+        ticks: Vec<(u64, f64, f64)>,
+    }
+
+    impl RunObserver for WireAndTruth {
+        fn on_wire(&mut self, event: &WireEvent) {
+            if let Some(frame) = event.received {
+                self.wire.push((event.t_us, event.sender, frame));
+            }
+        }
+
+        fn on_tick(&mut self, tick: &TickEvent<'_>) {
+            let m = tick.sample.motors[0];
+            self.ticks.push((tick.t_us, m.true_rpm, m.true_total_deg));
+        }
+    }
+
+    #[test]
+    fn the_plant_steps_every_200_us_between_the_frames_it_hears_and_the_feedback_it_sends() {
+        // The motor replayed on its own, one microsecond at a time: a frame that ends at t
+        // reaches it first, then its step (at every multiple of 200 us), then its feedback
+        // (every ms at its phase) and the tick. Its feedback must be what it sent in the run
+        // and its state at each tick the run's truth, to the bit: a step missed, taken twice
+        // or taken on the wrong side of a frame or of a feedback shows. At 500 kbit/s a
+        // command frame lasts about 250 us, so it ends after the plant's step at 200 us into
+        // the tick that sent it.
+        let mut scenario = builtin_named("m3508-speed-step").unwrap();
+        scenario.duration_ms = 120;
+        scenario.bus.bitrate_bps = 500_000;
+        // The feedback phase, drawn as the run draws it: first from the scenario's seed. A
+        // seed that puts it late in the ms, after steps that nothing else asks for.
+        let phase_of = |seed| Xoshiro256PlusPlus::seed_from_u64(seed).next_u64() % TICK_US;
+        scenario.seed = (0..).find(|&seed| phase_of(seed) > 800).unwrap();
+        let phase = phase_of(scenario.seed);
+        let mut seen = WireAndTruth::default();
+        run_observed(&scenario, &mut |_| {}, &mut seen).unwrap();
+        let spec = &scenario.motors[0];
+        let mut esc = DjiEsc::new(
+            MotorParams::for_model(spec.model),
+            spec.esc_id,
+            spec.load,
+            0,
+        );
+        let mut frames = seen.wire.iter().peekable();
+        let mut ticks = seen.ticks.iter().peekable();
+        let (mut sent, mut compared, mut late_commands) = (Vec::new(), 0, 0);
+        for t in 0..scenario.duration_ms * 1000 {
+            while let Some(&(end, sender, frame)) = frames.next_if(|(end, ..)| *end <= t) {
+                esc.on_frame(&frame);
+                late_commands += usize::from(sender == Sender::Mcu && end % 1000 > 200);
+            }
+            if t % 200 == 0 {
+                esc.step(t, PLANT_STEP_S);
+            }
+            if t % 1000 == phase {
+                sent.push(esc.feedback_frame().unwrap());
+            }
+            if let Some(&(_, rpm, deg)) = ticks.next_if(|(at, ..)| *at == t) {
+                assert_eq!(esc.speed_rpm().to_bits(), rpm.to_bits(), "speed at {t} us");
+                assert_eq!(
+                    esc.total_angle_deg().to_bits(),
+                    deg.to_bits(),
+                    "angle at {t} us"
+                );
+                compared += 1;
+            }
+        }
+        assert_eq!(compared, 120);
+        let feedback: Vec<CanFrame> = seen
+            .wire
+            .iter()
+            .filter(|(_, sender, _)| *sender == Sender::Device(0))
+            .map(|&(_, _, frame)| frame)
+            .collect();
+        assert!(
+            (119..=sent.len()).contains(&feedback.len()),
+            "{}",
+            feedback.len()
+        );
+        let differs = feedback
+            .iter()
+            .zip(&sent)
+            .position(|(run, replay)| run != replay);
+        assert_eq!(differs, None, "feedback frames from the first that differs");
+        // The comparison is of a motor that moved, told by frames that ended after a step.
+        assert!(seen.ticks.last().unwrap().1 > 250.0);
+        assert!(late_commands > 100, "{late_commands}");
     }
 
     #[test]
