@@ -577,6 +577,31 @@ fn dm_ids() -> impl Strategy<Value = (u16, u16)> {
     (0u16..0x7FF, 0u16..0x7FF).prop_filter("distinct IDs", |(a, b)| a != b)
 }
 
+/// A case the property below found: every field beyond its range, so each is clamped to
+/// its top. In f32 the position, velocity and gains reach their top codes (0xFFFF, 0xFFF),
+/// but the torque's top works out as (2 · 8.16696) · 4095 / (2 · 8.16696) = 4094.9998,
+/// truncated to 0xFFE: the frame would be FF×7 FE, Damiao's "save zero". It goes out with
+/// the torque code 0xFFA instead.
+#[test]
+fn dm_mit_command_at_every_top_with_a_torque_top_of_0xffe_is_not_save_zero() {
+    let limits = MitLimits {
+        p_max_rad: 3.1415927,
+        v_max_rad_s: 0.1,
+        t_max_nm: 8.16696,
+    };
+    let cmd = MitCommand {
+        position_rad: 24.93385,
+        velocity_rad_s: 3.7598628e21,
+        kp: 815.86273,
+        kd: 11555216000000.0,
+        torque_nm: 26.681833,
+    };
+    assert_eq!(
+        cmd.pack(&limits),
+        [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFA]
+    );
+}
+
 proptest! {
     #![proptest_config(config(256))]
 
@@ -601,13 +626,27 @@ proptest! {
             (kd, 0.0, 5.0, 12, "kd"),
             (t, -tm, tm, 12, "torque"),
         ];
+        // Never the shape of a special command (FF×7 then FB–FE): with the other four
+        // fields at the top of their codes, a torque code of 0xFFB–0xFFE goes out as 0xFFA,
+        // up to 4 codes below the request (`MitCommand::pack`).
+        let others_top = codes[..4] == [0xFFFF, 0xFFF, 0xFFF, 0xFFF];
+        prop_assert!(
+            !(others_top && (0xFFB..=0xFFE).contains(&codes[4])),
+            "the shape of a special command: {codes:X?}"
+        );
         for ((x, lo, hi, bits, name), code) in fields.into_iter().zip(codes) {
             prop_assert!(code < (1 << bits), "{name} code {code} overflows {bits} bits");
             let step = (hi - lo) / f64::from((1u32 << bits) - 1);
             let decoded = from_code(code, lo, hi, bits);
             let want = clamp_field(x, lo, hi);
+            let moved_down = if name == "torque" && others_top && code == 0xFFA {
+                4.0 * step
+            } else {
+                0.0
+            };
+            let slack = step * 1.001 + (hi - lo) * 1e-6;
             prop_assert!(
-                (decoded - want).abs() <= step * 1.001 + (hi - lo) * 1e-6,
+                decoded - want <= slack && want - decoded <= slack + moved_down,
                 "{name}: {x} → code {code} = {decoded}, want {want} ± {step}"
             );
         }
