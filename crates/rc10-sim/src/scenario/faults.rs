@@ -163,9 +163,10 @@ fn motor_bit(motor: usize) -> u64 {
 }
 
 /// Applies the faults that set a state (bus-off, no acknowledgement, power cut, stall,
-/// over-temperature) at the start of millisecond `t_ms` (their windows are whole
-/// milliseconds: nothing changes within one). A state is on while any of its windows is: a
-/// motor can be cut twice, the bus go off twice.
+/// over-temperature) for millisecond `t_ms`: call it once, at that millisecond's start,
+/// after the plants have been stepped up to it (the windows are whole milliseconds; a
+/// second call would force an over-temperature again). A state is on while any of its
+/// windows is: a motor can be cut twice, the bus go off twice.
 pub(super) fn apply_state_faults(
     scenario: &Scenario,
     bus: &mut SimBus,

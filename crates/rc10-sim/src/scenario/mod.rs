@@ -1,9 +1,10 @@
 //! Scenarios (motors, targets, faults) and the world loop that runs rc10-core's real bus,
 //! scheduler and drivers against the simulated bus and plants in deterministic virtual time.
 //!
-//! Time advances from event to event in whole microseconds: plant integration every 200 µs,
-//! the rc10 tick every 1 ms, each ESC's feedback every 1 ms at its own (seeded) phase, and frame
-//! ends on the bus. Received frames are dispatched to rc10 the moment they end on the wire,
+//! Time advances from event to event in whole microseconds: the rc10 tick every 1 ms, each
+//! ESC's feedback every 1 ms at its own (seeded) phase, and frame ends on the bus. The plants
+//! are integrated every 200 µs of virtual time, each step taken when something next reads or
+//! changes them. Received frames are dispatched to rc10 the moment they end on the wire,
 //! stamped with that time (an ideal RX interrupt); the controller's 3 TX buffers are modelled,
 //! sent in FIFO or lowest-ID-first order ([`Scenario::tx_order`]). Ticks are paced by rc10's
 //! `TickPacer`, as on a board.

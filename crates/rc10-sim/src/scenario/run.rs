@@ -76,10 +76,10 @@ pub(super) const TICK_US: u64 = 1000;
 /// yet (`next_plant_us` is the first of them, moved on past the last one taken).
 ///
 /// The plants are stepped when something is about to read or change them (a frame reaching
-/// the ESCs, an ESC's feedback, a tick, the state faults at a millisecond's start), not as
-/// events of their own: no other world event happens at a step time that has no other
-/// reason to be one, and every step still runs at its own time, in the same order with
-/// respect to everything that touches the ESCs.
+/// the ESCs, an ESC's feedback, the state faults at a millisecond's start, after which the
+/// step at that start is taken for the tick there), not as events of their own: nothing else
+/// happens at a step time that has no other reason to be an event, and every step still runs
+/// at its own time, in the same order with respect to everything that touches the ESCs.
 fn step_plants_before(escs: &mut [DjiEsc], next_plant_us: &mut u64, until_us: u64) {
     while *next_plant_us < until_us {
         for esc in escs.iter_mut() {
@@ -318,8 +318,8 @@ pub fn run_observed(
             next_feedback_min = next_feedback.iter().copied().min();
         }
 
+        // A tick falls on a millisecond's start: the plants have taken their step at `t`.
         if t == next_tick {
-            step_plants_before(&mut escs, &mut next_plant, t + 1);
             for (i, spec) in scenario.targets.iter().enumerate() {
                 let Some(k) = next_step.get_mut(i) else {
                     continue;
@@ -609,45 +609,81 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_plant_steps_every_200_us_between_the_frames_it_hears_and_the_feedback_it_sends() {
-        // The motor replayed on its own, one microsecond at a time: a frame that ends at t
-        // reaches it first, then its step (at every multiple of 200 us), then its feedback
-        // (every ms at its phase) and the tick. Its feedback must be what it sent in the run
-        // and its state at each tick the run's truth, to the bit: a step missed, taken twice
-        // or taken on the wrong side of a frame or of a feedback shows. At 500 kbit/s a
-        // command frame lasts about 250 us, so it ends after the plant's step at 200 us into
-        // the tick that sent it.
-        let mut scenario = builtin_named("m3508-speed-step").unwrap();
-        scenario.duration_ms = 120;
-        scenario.bus.bitrate_bps = 500_000;
-        // The feedback phase, drawn as the run draws it: first from the scenario's seed. A
-        // seed that puts it late in the ms, after steps that nothing else asks for.
-        let phase_of = |seed| Xoshiro256PlusPlus::seed_from_u64(seed).next_u64() % TICK_US;
-        scenario.seed = (0..).find(|&seed| phase_of(seed) > 800).unwrap();
-        let phase = phase_of(scenario.seed);
+    /// Motor 0's feedback phase in a run of a scenario with this seed: the run's first draw.
+    fn phase_of(seed: u64) -> u64 {
+        Xoshiro256PlusPlus::seed_from_u64(seed).next_u64() % TICK_US
+    }
+
+    /// Runs `scenario` and replays its motor 0 on its own, one microsecond at a time: the
+    /// frames from others that end at t reach it first, then, at the start of a millisecond,
+    /// its power cut, stall and over-temperature faults, then its step (at every multiple of
+    /// 200 us), then its feedback (every ms at its phase, while powered) and the tick. Its
+    /// feedback must be what it sent in the run and its state at each tick the run's truth,
+    /// to the bit. Returns the command frames that ended after the step 200 us into their
+    /// millisecond and those that ended on a step's time.
+    fn replay_motor_0(scenario: &Scenario) -> (usize, usize) {
         let mut seen = WireAndTruth::default();
-        run_observed(&scenario, &mut |_| {}, &mut seen).unwrap();
-        let spec = &scenario.motors[0];
-        let mut esc = DjiEsc::new(
-            MotorParams::for_model(spec.model),
-            spec.esc_id,
-            spec.load,
-            0,
+        run_observed(scenario, &mut |_| {}, &mut seen).unwrap();
+        let phase = phase_of(scenario.seed);
+        let is_feedback = |&&(_, sender, _): &&(u64, Sender, CanFrame)| sender == Sender::Device(0);
+        // The phase drawn here is the run's: the first feedback went out on an idle bus then.
+        let &(first_end, _, first) = seen.wire.iter().find(is_feedback).unwrap();
+        let duration = rc10_core::can::timing::frame_time_us(&first, scenario.bus.bitrate_bps);
+        assert_eq!(
+            first_end,
+            phase + u64::from(duration),
+            "motor 0's feedback phase"
         );
-        let mut frames = seen.wire.iter().peekable();
+
+        let spec = &scenario.motors[0];
+        let model = MotorParams::for_model(spec.model);
+        let mut esc = DjiEsc::new(model, spec.esc_id, spec.load, 0);
+        let mut frames = seen.wire.iter().filter(|w| !is_feedback(w)).peekable();
         let mut ticks = seen.ticks.iter().peekable();
-        let (mut sent, mut compared, mut late_commands) = (Vec::new(), 0, 0);
+        let mut sent = Vec::new();
+        let (mut compared, mut late_commands, mut commands_on_a_step) = (0, 0, 0);
         for t in 0..scenario.duration_ms * 1000 {
             while let Some(&(end, sender, frame)) = frames.next_if(|(end, ..)| *end <= t) {
                 esc.on_frame(&frame);
-                late_commands += usize::from(sender == Sender::Mcu && end % 1000 > 200);
+                if sender == Sender::Mcu {
+                    late_commands += usize::from(end % 1000 > 200);
+                    commands_on_a_step += usize::from(end % 200 == 0);
+                }
+            }
+            if t % 1000 == 0 {
+                let t_ms = t / 1000;
+                for fault in &scenario.faults {
+                    match *fault {
+                        Fault::PowerCut {
+                            motor: 0,
+                            from_ms,
+                            to_ms,
+                        } => {
+                            esc.set_powered(!in_window(t_ms, from_ms, to_ms));
+                        }
+                        Fault::Stall {
+                            motor: 0,
+                            from_ms,
+                            to_ms,
+                        } => {
+                            esc.set_locked(in_window(t_ms, from_ms, to_ms));
+                        }
+                        Fault::OverTemperature {
+                            motor: 0,
+                            at_ms,
+                            celsius,
+                        } if at_ms == t_ms => {
+                            esc.set_temperature_c(celsius);
+                        }
+                        _ => {}
+                    }
+                }
             }
             if t % 200 == 0 {
                 esc.step(t, PLANT_STEP_S);
             }
-            if t % 1000 == phase {
-                sent.push(esc.feedback_frame().unwrap());
+            if t % 1000 == phase && esc.powered() {
+                sent.push((t, esc.feedback_frame().unwrap()));
             }
             if let Some(&(_, rpm, deg)) = ticks.next_if(|(at, ..)| *at == t) {
                 assert_eq!(esc.speed_rpm().to_bits(), rpm.to_bits(), "speed at {t} us");
@@ -659,26 +695,68 @@ mod tests {
                 compared += 1;
             }
         }
-        assert_eq!(compared, 120);
-        let feedback: Vec<CanFrame> = seen
-            .wire
-            .iter()
-            .filter(|(_, sender, _)| *sender == Sender::Device(0))
-            .map(|&(_, _, frame)| frame)
-            .collect();
-        assert!(
-            (119..=sent.len()).contains(&feedback.len()),
-            "{}",
-            feedback.len()
-        );
-        let differs = feedback
-            .iter()
-            .zip(&sent)
-            .position(|(run, replay)| run != replay);
-        assert_eq!(differs, None, "feedback frames from the first that differs");
-        // The comparison is of a motor that moved, told by frames that ended after a step.
-        assert!(seen.ticks.last().unwrap().1 > 250.0);
+        assert_eq!(compared, scenario.duration_ms);
+        // Each feedback frame on the wire is the one sent last before it ended (a power cut
+        // drops the one it catches on the wire).
+        let mut on_wire = 0;
+        for &(end, _, frame) in seen.wire.iter().filter(is_feedback) {
+            let &(at, replayed) = sent.iter().rev().find(|(at, _)| *at < end).unwrap();
+            assert_eq!(frame, replayed, "feedback sent at {at} us");
+            on_wire += 1;
+        }
+        assert!(on_wire + 20 >= sent.len(), "{on_wire} of {}", sent.len());
+        // The comparison is of a motor that moved.
+        assert!(seen.ticks.iter().any(|&(_, rpm, _)| rpm > 250.0));
+        (late_commands, commands_on_a_step)
+    }
+
+    #[test]
+    fn the_plant_steps_every_200_us_between_the_frames_it_hears_and_the_feedback_it_sends() {
+        let mut scenario = builtin_named("m3508-speed-step").unwrap();
+        scenario.duration_ms = 120;
+        // At 500 kbit/s a command frame lasts about 250 us: it ends after the plant's step
+        // 200 us into the tick that sent it. The feedback goes out 400 us into each ms, at
+        // the time of a step that nothing else asks for; the steps at 600 and 800 us are
+        // still to be taken at the next millisecond's start, where the faults that change
+        // the plant take effect after them.
+        scenario.bus.bitrate_bps = 500_000;
+        scenario.seed = (0..).find(|&seed| phase_of(seed) == 400).unwrap();
+        scenario.faults = vec![
+            Fault::PowerCut {
+                motor: 0,
+                from_ms: 30,
+                to_ms: 45,
+            },
+            Fault::Stall {
+                motor: 0,
+                from_ms: 70,
+                to_ms: 80,
+            },
+            Fault::OverTemperature {
+                motor: 0,
+                at_ms: 100,
+                celsius: 130.0,
+            },
+        ];
+        let (late_commands, _) = replay_motor_0(&scenario);
         assert!(late_commands > 100, "{late_commands}");
+
+        // At 1 Mbit/s, a command frame held behind a feedback frame can end exactly on a
+        // step's time: it reaches the plant before that step. A seed whose phase puts the
+        // feedback just before the tick, for which that happens.
+        scenario.bus.bitrate_bps = 1_000_000;
+        scenario.faults.clear();
+        let on_a_step = (0..5000)
+            .filter(|&seed| (930..960).contains(&phase_of(seed)))
+            .find_map(|seed| {
+                scenario.seed = seed;
+                let (_, on_a_step) = replay_motor_0(&scenario);
+                (on_a_step > 0).then_some(on_a_step)
+            });
+        assert!(
+            on_a_step.is_some(),
+            "no command frame ended on a step's time"
+        );
     }
 
     #[test]
