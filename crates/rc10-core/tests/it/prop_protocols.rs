@@ -578,14 +578,14 @@ fn dm_ids() -> impl Strategy<Value = (u16, u16)> {
 }
 
 /// A case the property below found: every field beyond its range, so each is clamped to
-/// its top. In f32 the position, velocity and gains reach their top codes (0xFFFF, 0xFFF),
-/// but the torque's top works out as (2 · 8.16696) · 4095 / (2 · 8.16696) = 4094.9998,
-/// truncated to 0xFFE: the frame would be FF×7 FE, Damiao's "save zero". It goes out with
+/// its top (the position range is ±π). In f32 the position, velocity and gains reach their
+/// top codes (0xFFFF, 0xFFF), but the torque's top works out as
+/// (2 · 8.16696) · 4095 / (2 · 8.16696) = 4094.9998, truncated to 0xFFE: the frame would be FF×7 FE, Damiao's "save zero". It goes out with
 /// the torque code 0xFFA instead.
 #[test]
 fn dm_mit_command_at_every_top_with_a_torque_top_of_0xffe_is_not_save_zero() {
     let limits = MitLimits {
-        p_max_rad: 3.1415927,
+        p_max_rad: PI as f32,
         v_max_rad_s: 0.1,
         t_max_nm: 8.16696,
     };
