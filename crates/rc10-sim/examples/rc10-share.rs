@@ -10,39 +10,43 @@
 //! Arguments (all optional, in order): the scenario name (default `chassis-4x-m3508`), the
 //! simulated duration in ms (default 60 000) and the number of rounds (default 9). The
 //! scenario's motors must be rc10's DJI drivers, and it must have no faults and no chassis
-//! application (whose remote-control decoding and kinematics the replay does not run).
+//! application (whose remote-control decoding and kinematics the replay does not run); a run
+//! in which a tick found frames of earlier ticks still queued is refused too (the replay's
+//! port takes every frame at once, so rc10 would hear otherwise).
 //!
 //! The scenario is run once with an observer that records what rc10 was given and what it
 //! answered: every frame handed to `Bus::dispatch`, with its time and the dispatch result,
 //! and at every tick its time, `dt`, the transmit report and each motor's state after it.
-//! Then rc10 alone replays that record on motors of its own, as the run drives them: the
-//! scenario's targets set at their steps' ticks, each tick, its transmit (to a port that takes
-//! every frame) and the reading of every motor's `state()` under one critical section, and
-//! each frame dispatched at its time, in the run's order. A first replay checks every dispatch
-//! result, every transmit report and every motor's target, command, measured speed and angle
-//! and online flag against the run's, to the bit (else the replay would not be doing the
-//! run's work, and the example fails). The rounds then time the whole run and the replay one
+//! Then rc10 alone replays that record on motors of its own, as the run drives them: at each
+//! tick rc10's `TickPacer` paces it and the scenario's due targets are set, then the tick, its
+//! transmit (to a port that takes every frame) and the reading of every motor's `state()` run
+//! under one critical section; each frame is dispatched at its time, in the run's order. A
+//! first replay checks every tick's `dt`, every dispatch result, every transmit report, every
+//! motor's target, command, measured speed and angle and online flag after each tick, and at
+//! the end rc10's bus counters and each motor's offline events against the run's, to the bit
+//! (else the replay would not be doing the run's work, and the example fails). The rounds then time the whole run and the replay one
 //! after the other; the summary gives the medians of rounds 2 onwards, the share as the
 //! median of the rounds' own ratios (the two runs of a round meet the same hour).
 //!
 //! The replay runs rc10's code as the run does, without the simulator's code between its
-//! calls, and with one pass over the record besides (measured too, and printed): a simulator of
-//! this scenario that runs rc10 and reads its motors every tick cannot go faster on this
-//! machine, at this hour, than the replay.
+//! calls (and the motors called directly where the run calls them through `dyn`), and reads
+//! the record besides: a bare pass over it is timed too and printed, about 1 % of the run.
+//! A simulator of this scenario that runs rc10 and reads its motors every tick cannot go
+//! faster on this machine, at this hour, than the replay, less that pass.
 
 use std::hint::black_box;
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Instant as WallClock;
 
-use rc10_core::bus::{Bus, BusBuilder, Dispatch, TransmitReport};
+use rc10_core::bus::{Bus, BusBuilder, Dispatch, TickPacer, TransmitReport};
 use rc10_core::can::{CanFrame, CanTransmit, SendError};
 use rc10_core::motor::dji::{DjiConfig, DjiMotor};
 use rc10_core::motor::{Motor, MotorState, TargetError};
 use rc10_core::node::{CanNode, TxBatch};
 use rc10_core::time::Instant;
 use rc10_sim::scenario::{
-    Controller, MAX_MOTORS, MotorSample, RunObserver, Scenario, TargetKind, TickEvent,
+    Controller, MAX_MOTORS, MotorSample, RunObserver, RunResult, Scenario, TargetKind, TickEvent,
     builtin_named, run, run_observed,
 };
 
@@ -54,8 +58,8 @@ enum Given {
         frame: CanFrame,
         result: Dispatch,
     },
-    /// A tick at `t_us` with this `dt`, its transmit report, and the motors' states after it
-    /// from index `first` of [`Recorder::states`] on.
+    /// A tick at `t_us` with the `dt` rc10's pacer gave it, its transmit report, and the
+    /// motors' states after it from index `first` of [`Recorder::states`] on.
     Tick {
         t_us: u64,
         dt_s: f32,
@@ -175,18 +179,27 @@ fn set_target(motor: &DjiMotor, kind: TargetKind, value: f32) -> Result<(), Targ
 /// What a replay found different from the run (all zero when only timing).
 #[derive(Default)]
 struct Differences {
+    dts: usize,
     dispatches: usize,
     reports: usize,
     states: usize,
+    /// rc10's bus counters or a motor's offline events at the end.
+    totals: usize,
+}
+
+impl Differences {
+    fn none(&self) -> bool {
+        self.dts + self.dispatches + self.reports + self.states + self.totals == 0
+    }
 }
 
 /// Replays `given` on fresh motors for `scenario`, checking what rc10 answers against the
-/// run when `check`. Returns the wall time in seconds and the differences found.
+/// run when `run` is given. Returns the wall time in seconds and the differences found.
 fn replay(
     scenario: &Scenario,
     given: &[Given],
     states: &[Seen],
-    check: bool,
+    run: Option<&RunResult>,
 ) -> Result<(f64, Differences), String> {
     let motors: Vec<DjiMotor> = scenario
         .motors
@@ -209,7 +222,8 @@ fn replay(
     let bus = builder.build();
     let mut next_step = vec![0usize; scenario.targets.len()];
     let started = WallClock::now();
-    let differences = drive(
+    let check = run.is_some();
+    let mut differences = drive(
         &bus,
         &motors,
         scenario,
@@ -218,7 +232,14 @@ fn replay(
         states,
         check,
     )?;
-    Ok((started.elapsed().as_secs_f64(), differences))
+    let wall_s = started.elapsed().as_secs_f64();
+    if let Some(run) = run {
+        let offline: Vec<u32> = motors.iter().map(|m| m.state().offline_events).collect();
+        if bus.stats().snapshot() != run.counters || offline != run.offline_events {
+            differences.totals += 1;
+        }
+    }
+    Ok((wall_s, differences))
 }
 
 /// The replay's loop: what the run did to rc10, in its order.
@@ -232,6 +253,7 @@ fn drive(
     check: bool,
 ) -> Result<Differences, String> {
     let mut batch = TxBatch::new();
+    let mut pacer = TickPacer::new(scenario.bus.tick_period);
     let mut d = Differences::default();
     for g in given {
         match *g {
@@ -251,6 +273,14 @@ fn drive(
                 report,
                 first,
             } => {
+                let now = Instant::from_micros(t_us);
+                let paced = pacer.on_tick(now);
+                if paced.resync {
+                    bus.record_skipped_ticks(paced.skipped);
+                }
+                if check && paced.dt_s.to_bits() != dt_s.to_bits() {
+                    d.dts += 1;
+                }
                 // The targets whose steps are due, as the run sets them before its tick.
                 let t_ms = t_us / 1000;
                 for (spec, k) in scenario.targets.iter().zip(next_step.iter_mut()) {
@@ -266,7 +296,7 @@ fn drive(
                 }
                 let seen = states.get(first..).unwrap_or(&[]);
                 critical_section::with(|_| {
-                    bus.tick(Instant::from_micros(t_us), dt_s, &mut batch);
+                    bus.tick(now, paced.dt_s, &mut batch);
                     let r = black_box(bus.transmit(&batch, &mut TakeAll));
                     if check && r != report {
                         d.reports += 1;
@@ -345,22 +375,26 @@ fn main() -> ExitCode {
     }
 
     let mut recorder = Recorder::default();
-    if let Err(e) = run_observed(&scenario, &mut |_| {}, &mut recorder) {
-        eprintln!("{name}: {e}");
-        return ExitCode::FAILURE;
-    }
+    let recorded = match run_observed(&scenario, &mut |_| {}, &mut recorder) {
+        Ok(result) => result,
+        Err(e) => {
+            eprintln!("{name}: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
     if recorder.held {
         eprintln!("{name} cannot be replayed: a tick found frames of earlier ticks still queued");
         return ExitCode::FAILURE;
     }
     let (given, states) = (recorder.given, recorder.states);
-    match replay(&scenario, &given, &states, true) {
-        Ok((_, d)) if d.dispatches + d.reports + d.states == 0 => {}
+    match replay(&scenario, &given, &states, Some(&recorded)) {
+        Ok((_, d)) if d.none() => {}
         Ok((_, d)) => {
             eprintln!(
-                "the replay answered otherwise than the run: {} dispatch results, {} transmit \
-                 reports, {} motor states after a tick",
-                d.dispatches, d.reports, d.states
+                "the replay answered otherwise than the run: {} tick dt, {} dispatch results, \
+                 {} transmit reports, {} motor states after a tick, {} in the totals (bus \
+                 counters, offline events)",
+                d.dts, d.dispatches, d.reports, d.states, d.totals
             );
             return ExitCode::FAILURE;
         }
@@ -385,7 +419,7 @@ fn main() -> ExitCode {
         };
         let full_s = started.elapsed().as_secs_f64();
         drop(result);
-        let alone_s = match replay(&scenario, &given, &states, false) {
+        let alone_s = match replay(&scenario, &given, &states, None) {
             Ok((s, _)) => s,
             Err(e) => {
                 eprintln!("{name}: {e}");
