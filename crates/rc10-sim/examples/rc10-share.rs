@@ -35,6 +35,8 @@
 //! faster on this machine, at this hour, than the replay, less that pass.
 
 use std::hint::black_box;
+mod common;
+
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Instant as WallClock;
@@ -47,7 +49,7 @@ use rc10_core::node::{CanNode, TxBatch};
 use rc10_core::time::Instant;
 use rc10_sim::scenario::{
     Controller, MAX_MOTORS, MotorSample, RunObserver, RunResult, Scenario, TargetKind, TickEvent,
-    builtin_named, run, run_observed,
+    run, run_observed,
 };
 
 /// What rc10 was given during the run and what it answered, in the order it was given.
@@ -346,29 +348,14 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn main() -> ExitCode {
-    let mut args = std::env::args().skip(1);
-    let name = args.next().unwrap_or_else(|| "chassis-4x-m3508".into());
-    let duration_ms: u64 = match args.next().map(|s| s.parse()) {
-        None => 60_000,
-        Some(Ok(ms)) if ms > 0 => ms,
-        Some(_) => {
-            eprintln!("the duration is a whole number of milliseconds above 0");
+    let (name, scenario, rounds) = match common::scenario_and_count("rounds") {
+        Ok(parsed) => parsed,
+        Err(message) => {
+            eprintln!("{message}");
             return ExitCode::FAILURE;
         }
     };
-    let rounds: usize = match args.next().map(|s| s.parse()) {
-        None => 9,
-        Some(Ok(n)) if n >= 2 => n,
-        Some(_) => {
-            eprintln!("the number of rounds is a whole number, at least 2");
-            return ExitCode::FAILURE;
-        }
-    };
-    let Some(mut scenario) = builtin_named(&name) else {
-        eprintln!("no built-in scenario named {name}");
-        return ExitCode::FAILURE;
-    };
-    scenario.duration_ms = duration_ms;
+    let duration_ms = scenario.duration_ms;
     if let Some(why) = unsupported(&scenario) {
         eprintln!("{name} cannot be replayed: {why}");
         return ExitCode::FAILURE;

@@ -13,36 +13,23 @@
 //! ones reuse the memory the first freed, as a gain sweep does. Prints every run and the
 //! median of the runs after the first.
 
+mod common;
+
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use rc10_sim::scenario::{builtin_named, run};
+use rc10_sim::scenario::run;
 
 fn main() -> ExitCode {
-    let mut args = std::env::args().skip(1);
-    let name = args.next().unwrap_or_else(|| "chassis-4x-m3508".into());
-    let duration_ms: u64 = match args.next().map(|s| s.parse()) {
-        None => 60_000,
-        Some(Ok(ms)) if ms > 0 => ms,
-        Some(_) => {
-            eprintln!("the duration is a whole number of milliseconds above 0");
+    let (name, scenario, runs) = match common::scenario_and_count("runs") {
+        Ok(parsed) => parsed,
+        Err(message) => {
+            eprintln!("{message}");
             return ExitCode::FAILURE;
         }
     };
-    let runs: usize = match args.next().map(|s| s.parse()) {
-        None => 9,
-        Some(Ok(n)) if n >= 2 => n,
-        Some(_) => {
-            eprintln!("the number of runs is a whole number, at least 2");
-            return ExitCode::FAILURE;
-        }
-    };
-    let Some(mut scenario) = builtin_named(&name) else {
-        eprintln!("no built-in scenario named {name}");
-        return ExitCode::FAILURE;
-    };
-    scenario.duration_ms = duration_ms;
+    let duration_ms = scenario.duration_ms;
 
     // Written, not printed: a closed pipe (`| head`) ends the program quietly.
     let mut out = std::io::stdout().lock();
